@@ -1,0 +1,464 @@
+"""Scenario configuration: schema, defaults, loading and validation.
+
+A scenario is a YAML file, or a built-in by name (``acslam scenarios`` lists them). Every
+field has a default, so a scenario only states what differs. The thesis names the
+parameters of its algorithms but gives no values; where a default below is ours, the
+comment says where it comes from (robot and sensor numbers are the TurtleBot3 / LDS-02
+data sheet figures of thesis §5.1).
+
+Errors are raised as :class:`~acslam.errors.ConfigError` naming the file and the field
+path, e.g. ``scenario.yaml: robots.starts[1]: start pose lies in an obstacle``.
+"""
+
+from __future__ import annotations
+
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from acslam.errors import ConfigError
+
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Probability = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+Pose = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+
+class Section(BaseModel):
+    """Base of every config section: unknown keys are errors, values are immutable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# --------------------------------------------------------------------------- worlds
+
+
+class ThesisWorld(Section):
+    """One of the lab environments of thesis §5.2, approximated on a 40 m x 40 m grid."""
+
+    generator: Literal["thesis"]
+    experiment: Annotated[int, Field(ge=1, le=5)]
+    resolution_m: PositiveFloat = 0.05
+
+
+class VineyardWorld(Section):
+    """Parallel vine rows of plants with random gaps, headlands at both ends, a fence."""
+
+    generator: Literal["vineyard"]
+    resolution_m: PositiveFloat = 0.05
+    row_count: Annotated[int, Field(ge=1)] = 6
+    row_length_m: PositiveFloat = 14.0
+    row_spacing_m: PositiveFloat = 2.5
+    # Touching canopies: a row is a wall but for the gaps a missing plant leaves.
+    plant_spacing_m: PositiveFloat = 0.5
+    plant_radius_m: PositiveFloat = 0.2
+    gap_probability: Probability = 0.1
+    headland_m: PositiveFloat = 3.0
+    jitter_m: NonNegativeFloat = 0.05
+
+
+class DungeonWorld(Section):
+    """Rectangular rooms joined by corridors through doors, inside an outer wall."""
+
+    generator: Literal["dungeon"]
+    resolution_m: PositiveFloat = 0.05
+    width_m: PositiveFloat = 20.0
+    height_m: PositiveFloat = 20.0
+    room_count: Annotated[int, Field(ge=1)] = 8
+    room_size_min_m: PositiveFloat = 3.0
+    room_size_max_m: PositiveFloat = 6.0
+    corridor_width_m: PositiveFloat = 1.2
+    door_width_m: PositiveFloat = 0.9
+    wall_thickness_m: PositiveFloat = 0.15
+
+    @model_validator(mode="after")
+    def _sizes(self) -> DungeonWorld:
+        if self.room_size_min_m > self.room_size_max_m:
+            raise ValueError("room_size_min_m must not exceed room_size_max_m")
+        return self
+
+
+class OsmWorld(Section):
+    """Roads of an OpenStreetMap file (.osm, .osm.pbf, .osm.bz2) as free space."""
+
+    generator: Literal["osm"]
+    file: Path
+    resolution_m: PositiveFloat = 0.25
+    center_lat_lon: tuple[FiniteFloat, FiniteFloat] | None = None
+    width_m: PositiveFloat = 200.0
+    height_m: PositiveFloat = 200.0
+    road_width_m: PositiveFloat = 4.0
+    highway_types: list[str] | None = None
+
+
+class FloorplanWorld(Section):
+    """A floor-plan image: grey >= free_threshold is free, the rest occupied."""
+
+    generator: Literal["floorplan"]
+    file: Path
+    resolution_m: PositiveFloat = 0.05
+    free_threshold: Annotated[int, Field(ge=1, le=255)] = 250
+
+
+class MapFileWorld(Section):
+    """A ROS map_server map (yaml + image); unknown cells count as occupied."""
+
+    generator: Literal["map_file"]
+    file: Path
+
+
+_WORLD_TAGS = ("thesis", "vineyard", "dungeon", "osm", "floorplan", "map_file")
+WorldConfig = Annotated[
+    ThesisWorld | VineyardWorld | DungeonWorld | OsmWorld | FloorplanWorld | MapFileWorld,
+    Field(discriminator="generator"),
+]
+
+
+class LandmarkConfig(Section):
+    """Camera landmarks placed at world creation, in free space close to structure."""
+
+    density_per_m2: NonNegativeFloat = 0.5
+    max_obstacle_distance_m: PositiveFloat = 0.3
+    z_min_m: FiniteFloat = 0.1
+    z_max_m: FiniteFloat = 1.0
+
+    @model_validator(mode="after")
+    def _heights(self) -> LandmarkConfig:
+        if self.z_min_m > self.z_max_m:
+            raise ValueError("z_min_m must not exceed z_max_m")
+        return self
+
+
+# --------------------------------------------------------------------------- robots
+
+
+class RobotsConfig(Section):
+    """The team: start poses ``[x, y, theta]`` and the TurtleBot3 Burger's limits."""
+
+    count: Annotated[int, Field(ge=1)] | None = None
+    starts: list[Pose] | None = None
+    radius_m: PositiveFloat = 0.105
+    max_v_mps: PositiveFloat = 0.22
+    max_omega_radps: PositiveFloat = 2.84
+    max_acc_v_mps2: PositiveFloat = 0.5
+    max_acc_omega_radps2: PositiveFloat = 3.0
+
+
+# --------------------------------------------------------------------------- sensors
+
+
+class OdometryConfig(Section):
+    """Odometry/IMU estimate (thesis eqs. 4.73-4.75).
+
+    Biases follow the first-order Gauss-Markov process b_t = a b_{t-1} + N(0, s^2) of
+    eq. 4.73, stated in continuous time so it does not depend on the step: a =
+    exp(-dt / correlation_time_s) and s = bias_std * sqrt(1 - a^2), which keeps the
+    stationary standard deviation at ``bias_std``. Scale errors (4.74-4.75) are drawn
+    once per robot from N(0, scale_std^2).
+    """
+
+    rate_hz: PositiveFloat = 20.0
+    bias_v_std_mps: NonNegativeFloat = 0.005
+    bias_omega_std_radps: NonNegativeFloat = 0.002
+    bias_correlation_time_s: PositiveFloat = 30.0
+    scale_v_std: NonNegativeFloat = 0.02
+    scale_omega_std: NonNegativeFloat = 0.02
+
+
+class LidarConfig(Section):
+    """2D LiDAR like the LDS-02: 360 beams over 360 deg, 8 m, 10 Hz.
+
+    Range noise std is ``range_noise_std_m + range_noise_rel * range``, a fit of the
+    data sheet's +-10 mm below 0.3 m and +-3 % (taken as 2 sigma) beyond.
+    """
+
+    rate_hz: PositiveFloat = 10.0
+    beams: Annotated[int, Field(ge=1)] = 360
+    fov_rad: Annotated[float, Field(gt=0, le=2 * math.pi)] = 2 * math.pi
+    range_min_m: NonNegativeFloat = 0.16
+    range_max_m: PositiveFloat = 8.0
+    range_noise_std_m: NonNegativeFloat = 0.005
+    range_noise_rel: NonNegativeFloat = 0.015
+    angle_noise_std_rad: NonNegativeFloat = 0.002
+
+    @model_validator(mode="after")
+    def _ranges(self) -> LidarConfig:
+        if self.range_min_m >= self.range_max_m:
+            raise ValueError("range_min_m must be below range_max_m")
+        return self
+
+
+class CameraConfig(Section):
+    """Landmark camera (RGB-D, OAK-D Pro-like): range, horizontal FOV, point noise."""
+
+    rate_hz: PositiveFloat = 5.0
+    range_min_m: NonNegativeFloat = 0.3
+    range_max_m: PositiveFloat = 4.0
+    fov_rad: Annotated[float, Field(gt=0, le=2 * math.pi)] = math.radians(70.0)
+    noise_std_m: NonNegativeFloat = 0.03
+
+    @model_validator(mode="after")
+    def _ranges(self) -> CameraConfig:
+        if self.range_min_m >= self.range_max_m:
+            raise ValueError("range_min_m must be below range_max_m")
+        return self
+
+
+class SensorsConfig(Section):
+    odometry: OdometryConfig = OdometryConfig()
+    lidar: LidarConfig = LidarConfig()
+    camera: CameraConfig = CameraConfig()
+
+
+class SimConfig(Section):
+    """Simulator clock: the fixed integration step of eq. 4.72 and the time limit."""
+
+    dt_s: PositiveFloat = 0.02
+    max_time_s: PositiveFloat = 600.0
+
+
+# --------------------------------------------------------------------------- algorithms
+
+
+class SlamConfig(Section):
+    """Factor-graph SLAM (thesis §4.4.1-4.4.2). Noise sigmas are ours.
+
+    Odometry sigmas grow with the distance / angle travelled between keyframes, never
+    below the ``*_min_*`` floors. ``planar_sigma`` holds z, roll and pitch of the SE(3)
+    poses near zero (the robots are planar). ``huber_k`` is the Huber threshold on the
+    whitened (Mahalanobis) residual norm of an observation factor; 2.8 is the 95 %
+    quantile of a 3-dof chi distribution, so inliers keep their full Gaussian weight.
+    The association gates: Euclidean gate (m), then the squared Mahalanobis gate
+    (11.34 = chi-square 3 dof, 99 %), then a likelihood floor (a density, 1/m^3). A point
+    with no candidate starts a new landmark only if every landmark is further than
+    ``new_landmark_mahalanobis_gate`` (squared; 25 ~ 5 sigma): in between it is ambiguous
+    and dropped, otherwise the 1 % of true re-observations outside the 99 % gate would
+    each spawn a duplicate landmark.
+    """
+
+    prior_sigma_xy_m: PositiveFloat = 0.01
+    prior_sigma_theta_rad: PositiveFloat = 0.01
+    planar_sigma: PositiveFloat = 0.001
+    odom_sigma_xy_per_m: PositiveFloat = 0.05
+    odom_sigma_theta_per_rad: PositiveFloat = 0.05
+    odom_sigma_theta_per_m: NonNegativeFloat = 0.02
+    odom_sigma_min_xy_m: PositiveFloat = 0.005
+    odom_sigma_min_theta_rad: PositiveFloat = 0.005
+    landmark_sigma_m: PositiveFloat = 0.1
+    landmark_radial_sigma_m: NonNegativeFloat = 0.0
+    landmark_angular_sigma_rad: NonNegativeFloat = 0.0
+    huber_k: PositiveFloat = 2.8
+    keyframe_distance_m: PositiveFloat = 0.3
+    keyframe_angle_rad: PositiveFloat = 0.3
+    association_gate_m: PositiveFloat = 1.0
+    association_mahalanobis_gate: PositiveFloat = 11.34
+    association_min_likelihood: NonNegativeFloat = 0.01
+    new_landmark_mahalanobis_gate: PositiveFloat = 25.0
+    isam_relinearize_threshold: PositiveFloat = 0.01
+    correction_threshold_m: PositiveFloat = 0.05
+
+
+class MappingConfig(Section):
+    """Log-odds occupancy grid (thesis §4.4.3, eqs. 4.25-4.34)."""
+
+    resolution_m: PositiveFloat = 0.05
+    delta_free: Annotated[float, Field(lt=0, allow_inf_nan=False)] = -0.4
+    delta_occ: PositiveFloat = 0.85
+    distance_alpha_per_m: NonNegativeFloat = 0.05
+    # Half a cell: with sigma = one cell the kernel's +0.52 at the neighbour in front of a
+    # wall outweighs that cell's free update and every wall grows a cell toward the robot.
+    hit_sigma_m: PositiveFloat = 0.025
+    hit_radius_m: NonNegativeFloat = 0.1
+    log_odds_min: FiniteFloat = -5.0
+    log_odds_max: FiniteFloat = 5.0
+    occupied_probability: Probability = 0.65
+    free_probability: Probability = 0.35
+    # Beams are used up to this range; a longer (or, if enabled, no-return) beam only
+    # clears free space up to it, with no occupied update.
+    max_range_m: PositiveFloat = 8.0
+    free_on_no_return: bool = True
+
+    @model_validator(mode="after")
+    def _bounds(self) -> MappingConfig:
+        if self.log_odds_min >= self.log_odds_max:
+            raise ValueError("log_odds_min must be below log_odds_max")
+        if self.free_probability >= self.occupied_probability:
+            raise ValueError("free_probability must be below occupied_probability")
+        return self
+
+
+class CostmapConfig(Section):
+    """Exponential-decay costmap (eqs. 4.35-4.36) plus lethal inflation."""
+
+    cost_max: PositiveFloat = 1.0
+    decay_lambda_per_m: PositiveFloat = 5.0
+    radius_m: PositiveFloat = 0.5
+    unknown_cost: Probability = 0.5
+
+
+class ExplorationConfig(Section):
+    """Frontier detection (EWFD) and DBSCAN clustering (thesis §4.5)."""
+
+    dbscan_eps_m: PositiveFloat = 0.3
+    dbscan_min_points: Annotated[int, Field(ge=1)] = 5
+    min_cluster_size: Annotated[int, Field(ge=1)] = 5
+
+
+class AllocationConfig(Section):
+    """Frontier-to-robot assignment (thesis §4.6, eqs. 4.37-4.42)."""
+
+    method: Literal["factor-graph", "hungarian", "greedy", "thesis"] = "factor-graph"
+    alpha: NonNegativeFloat = 1.0
+    beta: NonNegativeFloat = 0.05
+    conflict_lambda: FiniteFloat = 0.01
+
+
+class PlanningConfig(Section):
+    """Global A* and local planning (thesis §4.7-4.8).
+
+    The thesis names these parameters but gives no values; the defaults are ours, chosen
+    for the TurtleBot3 Burger (radius 0.105 m, 0.22 m/s) on a 0.05 m grid, and tuned on
+    the planning tests (head-on swap, obstacle bypass).
+    """
+
+    local_planner: Literal["fgp", "dwa"] = "fgp"
+    replan_period_s: PositiveFloat = 2.0
+    # A* step cost = step length (m) * (1 + astar_cost_weight * cell cost).
+    astar_cost_weight: NonNegativeFloat = 5.0
+    # Start/goal inside lethal cells snap to the nearest free cell within this radius:
+    # a robot localised a few cells into the inflation band must still get a path.
+    astar_max_snap_m: NonNegativeFloat = 0.5
+    # Line-of-sight smoothing of the A* path (shorter in metres; cost no longer optimal).
+    astar_shortcut: bool = True
+    horizon_s: PositiveFloat = 2.0  # T_p (eqs. 4.48-4.50, 4.67)
+    horizon_steps: Annotated[int, Field(ge=2)] = 10  # N of the FGP, dt = T_p / N = 0.2 s
+    # Local planner rate: 10 Hz, a usual ROS local-planner rate and 5 sim steps of 0.02 s.
+    control_period_s: PositiveFloat = 0.1
+    # d_max^obs (eqs. 4.54, 4.63): ~3 robot radii, so the repulsion starts well before
+    # contact yet a 0.9 m door (0.45 m to either side) exerts no push at its centre.
+    obstacle_influence_m: PositiveFloat = 0.3
+    # d_max^robot (eqs. 4.55, 4.65): robots repel within ~2.5 diameters.
+    robot_influence_m: PositiveFloat = 0.55
+    # DWA (eqs. 4.48-4.56): velocity samples and the weights of eq. 4.51.
+    dwa_v_samples: Annotated[int, Field(ge=2)] = 11
+    dwa_omega_samples: Annotated[int, Field(ge=3)] = 21
+    dwa_weight_progress: NonNegativeFloat = 1.0
+    dwa_weight_heading: NonNegativeFloat = 0.3
+    dwa_weight_costmap: NonNegativeFloat = 0.5
+    dwa_weight_robot: NonNegativeFloat = 0.5
+    # FGP sigmas (eqs. 4.59-4.68). Start position is the measured pose (tight); start
+    # velocity may change by about one acceleration step; dynamics position sigma keeps
+    # the states kinematically consistent, the velocity sigma is ~max_acc * dt.
+    fgp_start_sigma_m: PositiveFloat = 0.001
+    fgp_start_sigma_mps: PositiveFloat = 0.05
+    fgp_dynamics_sigma_m: PositiveFloat = 0.005
+    fgp_dynamics_sigma_mps: PositiveFloat = 0.1
+    fgp_goal_sigma_m: PositiveFloat = 0.2  # moderate: the goal may yield to obstacles
+    fgp_obstacle_sigma: PositiveFloat = 0.1  # unitless error 1 - d / d_max
+    fgp_robot_sigma: PositiveFloat = 0.05  # unitless error 1 - d / d_max
+    fgp_max_iterations: Annotated[int, Field(ge=1)] = 20
+    # Sideways nudge of the initial guess when another robot is dead ahead: a symmetric
+    # head-on meeting is a saddle of eq. 4.69 where both robots would stop; both keep right.
+    fgp_keep_right_m: NonNegativeFloat = 0.1
+    stuck_timeout_s: PositiveFloat = 10.0
+    # Less than this gain in distance to the goal over stuck_timeout_s is "no progress".
+    stuck_min_progress_m: PositiveFloat = 0.1
+
+
+class AlgorithmsConfig(Section):
+    slam: SlamConfig = SlamConfig()
+    mapping: MappingConfig = MappingConfig()
+    costmap: CostmapConfig = CostmapConfig()
+    exploration: ExplorationConfig = ExplorationConfig()
+    allocation: AllocationConfig = AllocationConfig()
+    planning: PlanningConfig = PlanningConfig()
+
+
+# --------------------------------------------------------------------------- scenario
+
+
+class ScenarioConfig(Section):
+    """A whole scenario: world, team, sensors, algorithms, seed."""
+
+    name: str = "scenario"
+    description: str = ""
+    seed: Annotated[int, Field(ge=0)] = 0
+    world: WorldConfig
+    landmarks: LandmarkConfig = LandmarkConfig()
+    robots: RobotsConfig = RobotsConfig()
+    sensors: SensorsConfig = SensorsConfig()
+    sim: SimConfig = SimConfig()
+    algorithms: AlgorithmsConfig = AlgorithmsConfig()
+
+
+def builtin_scenario_names() -> list[str]:
+    """Names of the scenarios shipped with acslam, sorted."""
+    folder = resources.files("acslam") / "scenarios"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def _field_path(loc: tuple[Any, ...]) -> str:
+    """Pydantic error location -> ``robots.starts[1]``, without the world's union tag."""
+    if len(loc) > 1 and loc[0] == "world" and isinstance(loc[1], str) and loc[1] in _WORLD_TAGS:
+        loc = loc[:1] + loc[2:]
+    parts: list[str] = []
+    for item in loc:
+        parts.append(f"[{item}]" if isinstance(item, int) else ("." if parts else "") + str(item))
+    return "".join(parts)
+
+
+def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
+    """Validate already-loaded YAML data; relative file paths resolve against ``source``."""
+    if not isinstance(data, dict):
+        raise ConfigError(source, "", "a scenario must be a YAML mapping of sections")
+    try:
+        config = ScenarioConfig.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors()
+        first = errors[0]
+        more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
+        message = first["msg"].removeprefix("Value error, ")
+        raise ConfigError(source, _field_path(first["loc"]), message + more) from None
+    world_file = getattr(config.world, "file", None)
+    if world_file is not None and not world_file.is_absolute() and Path(source).is_file():
+        resolved = (Path(source).parent / world_file).resolve()
+        config = config.model_copy(
+            update={"world": config.world.model_copy(update={"file": resolved})}
+        )
+    return config
+
+
+def load_scenario_config(name_or_path: str | Path) -> tuple[ScenarioConfig, str]:
+    """Load a scenario by built-in name or YAML path; returns it with its source label."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ConfigError(path, "", "scenario file not found")
+        source = str(path)
+        text = path.read_text(encoding="utf-8")
+    else:
+        names = builtin_scenario_names()
+        if str(name_or_path) not in names:
+            raise ConfigError(
+                str(name_or_path),
+                "",
+                "unknown scenario (not a file, not a built-in; built-ins: "
+                + ", ".join(names)
+                + ")",
+            )
+        source = f"<built-in {name_or_path}>"
+        text = (resources.files("acslam") / "scenarios" / f"{name_or_path}.yaml").read_text(
+            encoding="utf-8"
+        )
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(source, "", f"invalid YAML{where}") from None
+    return parse_scenario(data, source), source

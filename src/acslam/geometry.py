@@ -1,0 +1,39 @@
+"""Planar geometry helpers on plain floats and arrays (poses are ``[x, y, theta]``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def wrap_angle(angle: float) -> float:
+    """Wrap an angle in radians to [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def wrap_angles(angles: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`wrap_angle`."""
+    return (np.asarray(angles) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """SE(2) composition a * b: the pose b given in a's frame, expressed in the world."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array(
+        [a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])]
+    )
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """SE(2) relative pose a^-1 * b: b expressed in the frame of a."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])])
+
+
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Map (N, 2) points from the frame of ``pose`` to the world frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rot = np.array([[c, -s], [s, c]])
+    return points @ rot.T + pose[:2]

@@ -1,0 +1,87 @@
+"""Grid geometry shared by worlds, maps and planners.
+
+Cell ``(row, col)`` covers ``x in [x0 + col*res, x0 + (col+1)*res)`` and
+``y in [y0 + row*res, y0 + (row+1)*res)``: rows grow with y (y-up, as in ROS maps once
+the image rows are flipped), so ``array[row, col]`` indexing matches ``(y, x)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Placement of a 2D grid in the world frame (units: metres)."""
+
+    origin_x_m: float
+    origin_y_m: float
+    resolution_m: float
+    rows: int
+    cols: int
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.rows, self.cols)
+
+    @property
+    def width_m(self) -> float:
+        return self.cols * self.resolution_m
+
+    @property
+    def height_m(self) -> float:
+        return self.rows * self.resolution_m
+
+    def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) world points -> (N, 2) integer ``[row, col]`` (may lie outside the grid)."""
+        xy = np.atleast_2d(np.asarray(xy, dtype=float))
+        col = np.floor((xy[:, 0] - self.origin_x_m) / self.resolution_m).astype(np.int64)
+        row = np.floor((xy[:, 1] - self.origin_y_m) / self.resolution_m).astype(np.int64)
+        return np.stack([row, col], axis=1)
+
+    def cell_to_world(self, cells: np.ndarray) -> np.ndarray:
+        """(N, 2) ``[row, col]`` -> (N, 2) world ``[x, y]`` of the cell centres."""
+        cells = np.atleast_2d(np.asarray(cells))
+        x = self.origin_x_m + (cells[:, 1] + 0.5) * self.resolution_m
+        y = self.origin_y_m + (cells[:, 0] + 0.5) * self.resolution_m
+        return np.stack([x, y], axis=1)
+
+    def contains(self, cells: np.ndarray) -> np.ndarray:
+        """Boolean mask of the ``[row, col]`` cells that lie inside the grid."""
+        cells = np.atleast_2d(cells)
+        return (
+            (cells[:, 0] >= 0)
+            & (cells[:, 0] < self.rows)
+            & (cells[:, 1] >= 0)
+            & (cells[:, 1] < self.cols)
+        )
+
+
+@numba.njit(cache=True)
+def bresenham(r0: int, c0: int, r1: int, c1: int) -> np.ndarray:
+    """Cells of the Bresenham line from ``(r0, c0)`` to ``(r1, c1)``, both included.
+
+    Returns an (N, 2) int64 array of ``[row, col]`` in order from the start cell.
+    """
+    dr = abs(r1 - r0)
+    dc = abs(c1 - c0)
+    sr = 1 if r1 >= r0 else -1
+    sc = 1 if c1 >= c0 else -1
+    n = max(dr, dc) + 1
+    out = np.empty((n, 2), dtype=np.int64)
+    err = dc - dr
+    r, c = r0, c0
+    for i in range(n):
+        out[i, 0] = r
+        out[i, 1] = c
+        e2 = 2 * err
+        if e2 >= -dr:
+            err -= dr
+            c += sc
+        if e2 <= dc:
+            err += dc
+            r += sr
+    return out

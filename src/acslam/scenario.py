@@ -1,0 +1,113 @@
+"""A loaded scenario: validated config, its ground-truth world, start poses, landmarks.
+
+The checks that need the world (a start pose inside a wall or off the map, robots that
+overlap, more robots than start poses) live here and raise a
+:class:`~acslam.errors.ConfigError` naming the field, like the schema checks do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from acslam.config import ScenarioConfig, load_scenario_config
+from acslam.errors import ConfigError
+from acslam.seeding import Stream, rng
+from acslam.worlds.generators import build_world
+from acslam.worlds.landmarks import place_landmarks
+from acslam.worlds.world import World
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """Everything a run needs to start; ``starts`` has one row per robot."""
+
+    config: ScenarioConfig
+    source: str
+    world: World
+    starts: np.ndarray
+    landmarks: np.ndarray
+
+    @property
+    def robot_count(self) -> int:
+        return len(self.starts)
+
+
+def _check_starts(starts: np.ndarray, world: World, radius_m: float, source: str, field: str):
+    spec = world.spec
+    x_max = spec.origin_x_m + spec.width_m
+    y_max = spec.origin_y_m + spec.height_m
+    for i, (x, y, _theta) in enumerate(starts):
+        where = f"{field}[{i}]"
+        if not (spec.origin_x_m <= x < x_max and spec.origin_y_m <= y < y_max):
+            raise ConfigError(
+                source,
+                where,
+                f"start pose ({x:g}, {y:g}) lies outside the map "
+                f"[{spec.origin_x_m:g}, {x_max:g}) x [{spec.origin_y_m:g}, {y_max:g}) m",
+            )
+        clearance = world.clearance_at(x, y)
+        if clearance < radius_m:
+            raise ConfigError(
+                source,
+                where,
+                f"start pose ({x:g}, {y:g}) is in an obstacle or closer to one "
+                f"({clearance:.3f} m) than the robot radius ({radius_m:g} m)",
+            )
+        for j in range(i):
+            gap = float(np.hypot(x - starts[j, 0], y - starts[j, 1]))
+            if gap < 2 * radius_m:
+                raise ConfigError(
+                    source,
+                    where,
+                    f"robot {i} overlaps robot {j}: centres {gap:.3f} m apart, "
+                    f"need >= {2 * radius_m:g} m (two radii)",
+                )
+
+
+def build_scenario(config: ScenarioConfig, source: str, robots: int | None = None) -> Scenario:
+    """Build the world and check the team against it.
+
+    ``robots`` overrides ``robots.count`` and picks the first N start poses.
+    """
+    try:
+        world = build_world(config.world, config.seed)
+    except ConfigError as exc:
+        if exc.source != ConfigError(None, "", "").source:
+            raise
+        raise ConfigError(source, exc.field, exc.problem) from None
+    team = config.robots
+    if team.starts is not None:
+        available, field = np.array(team.starts, dtype=float), "robots.starts"
+    else:
+        available, field = world.default_starts, "robots.starts (the world's default starts)"
+    count = robots or team.count or (len(team.starts) if team.starts else 1)
+    if len(available) == 0:
+        raise ConfigError(source, "robots.starts", "this world suggests no start poses: give some")
+    if count > len(available):
+        count_field = "--robots" if robots else "robots.count"
+        raise ConfigError(
+            source,
+            count_field,
+            f"{count} robots requested but only {len(available)} start poses are available",
+        )
+    starts = available[:count]
+    _check_starts(starts, world, team.radius_m, source, field)
+
+    reachable = world.reachable_free(starts[0, 0], starts[0, 1], team.radius_m)
+    landmarks = place_landmarks(
+        world, config.landmarks, rng(config.seed, Stream.LANDMARKS), reachable
+    )
+    return Scenario(config, source, world, starts, landmarks)
+
+
+def load_scenario(
+    name_or_path: str | Path, robots: int | None = None, seed: int | None = None
+) -> Scenario:
+    """Load a built-in scenario by name or a YAML file, optionally overriding team and seed."""
+    config, source = load_scenario_config(name_or_path)
+    if seed is not None:
+        config = config.model_copy(update={"seed": seed})
+    return build_scenario(config, source, robots)
