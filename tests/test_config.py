@@ -208,3 +208,16 @@ def test_cli_reports_config_error_in_one_line(tmp_path: Path) -> None:
     assert lines[0].startswith("acslam: error: ")
     assert "sensors.lidar.rate_hz" in lines[0]
     assert str(path) in lines[0]
+
+
+EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+def test_examples_load(path: Path) -> None:
+    config, _ = load_scenario_config(path)
+    if not config.world.file.exists():
+        pytest.skip(f"shared dataset not found: {config.world.file}")
+    scenario = load_scenario(path)
+    assert scenario.robot_count == 3
+    assert len(scenario.landmarks) > 0
