@@ -1,0 +1,117 @@
+"""The thesis's evaluation metrics (chapter 5) as pure functions on arrays.
+
+Nothing here reads files or draws: a run computes the numbers once, and reports are built
+from the saved results later.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from itertools import combinations
+
+import numpy as np
+
+from acslam.geometry import wrap_angles
+
+
+def _interpolate_poses(
+    stamps: np.ndarray, ref_stamps: np.ndarray, ref_poses: np.ndarray
+) -> np.ndarray:
+    """Reference poses linearly interpolated at ``stamps`` (heading through its unwrap)."""
+    x = np.interp(stamps, ref_stamps, ref_poses[:, 0])
+    y = np.interp(stamps, ref_stamps, ref_poses[:, 1])
+    theta = wrap_angles(np.interp(stamps, ref_stamps, np.unwrap(ref_poses[:, 2])))
+    return np.column_stack([x, y, theta])
+
+
+def localization_errors(
+    stamps: np.ndarray, poses: np.ndarray, true_stamps: np.ndarray, true_poses: np.ndarray
+) -> dict[str, float]:
+    """Position and heading errors of a trajectory against ground truth (Table 5.2).
+
+    The truth is interpolated at the estimate's stamps; stamps outside the truth's span
+    are dropped. Position error is the Euclidean distance, heading error the wrapped
+    absolute difference. ``std`` is the standard deviation of the error magnitudes.
+    """
+    stamps = np.asarray(stamps, dtype=float)
+    inside = (stamps >= true_stamps[0]) & (stamps <= true_stamps[-1])
+    if not inside.any():
+        raise ValueError("the estimated trajectory does not overlap the ground truth in time")
+    truth = _interpolate_poses(stamps[inside], true_stamps, true_poses)
+    estimate = np.asarray(poses, dtype=float)[inside]
+    distance = np.hypot(*(estimate[:, :2] - truth[:, :2]).T)
+    yaw = np.abs(wrap_angles(estimate[:, 2] - truth[:, 2]))
+    return {
+        "final_dist_m": float(distance[-1]),
+        "mae_m": float(distance.mean()),
+        "rmse_m": float(np.sqrt(np.mean(distance**2))),
+        "std_m": float(distance.std()),
+        "final_yaw_rad": float(yaw[-1]),
+        "mae_yaw_rad": float(yaw.mean()),
+        "rmse_yaw_rad": float(np.sqrt(np.mean(yaw**2))),
+        "std_yaw_rad": float(yaw.std()),
+    }
+
+
+def confusion_rates(true_occupied: np.ndarray, estimated_values: np.ndarray) -> dict[str, float]:
+    """Confusion-based map accuracy over the known cells of the estimate (Table 5.4).
+
+    Positive means occupied. ``estimated_values`` are OccupancyGrid values (-1 unknown,
+    0 free, 100 occupied); unknown cells are not scored. Rates with an empty denominator
+    are NaN, which JSON writes as null.
+    """
+    known = estimated_values != -1
+    predicted = estimated_values == 100
+    tp = int(np.count_nonzero(known & predicted & true_occupied))
+    tn = int(np.count_nonzero(known & ~predicted & ~true_occupied))
+    fp = int(np.count_nonzero(known & predicted & ~true_occupied))
+    fn = int(np.count_nonzero(known & ~predicted & true_occupied))
+
+    def ratio(num: int, den: int) -> float:
+        return num / den if den else float("nan")
+
+    return {
+        "accuracy": ratio(tp + tn, tp + tn + fp + fn),
+        "tpr": ratio(tp, tp + fn),
+        "tnr": ratio(tn, tn + fp),
+        "fpr": ratio(fp, fp + tn),
+        "fnr": ratio(fn, fn + tp),
+        "tp": tp,
+        "tn": tn,
+        "fp": fp,
+        "fn": fn,
+    }
+
+
+def coverage_by_combination(
+    explored: Mapping[str, np.ndarray], cell_area_m2: float
+) -> dict[str, dict[str, float]]:
+    """Explored area of every non-empty combination of robots (Table 5.3).
+
+    ``explored`` maps a robot name to the mask of cells its own scans made known. A
+    combination's area is that of the union of its robots' masks; its rate is that area
+    over the whole team's, as in the thesis's tables (the full team is 1.0). Keys join
+    the names with ``+`` in the given order.
+    """
+    names = list(explored)
+    team_area = np.count_nonzero(np.logical_or.reduce([explored[n] for n in names]))
+    result: dict[str, dict[str, float]] = {}
+    for size in range(1, len(names) + 1):
+        for combo in combinations(names, size):
+            union = np.logical_or.reduce([explored[n] for n in combo])
+            cells = np.count_nonzero(union)
+            result["+".join(combo)] = {
+                "area_m2": cells * cell_area_m2,
+                "rate": cells / team_area if team_area else 0.0,
+            }
+    return result
+
+
+def timing(finish_times_s: Mapping[str, float]) -> dict[str, object]:
+    """Exploration time per robot, of the team, and the gap between first and last (Table 5.1)."""
+    times = list(finish_times_s.values())
+    return {
+        "per_robot_s": dict(finish_times_s),
+        "total_s": max(times),
+        "gap_s": max(times) - min(times),
+    }
