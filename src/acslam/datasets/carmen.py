@@ -1,0 +1,145 @@
+"""CARMEN laser logs (``.clf``/``.log``, plain, ``.bz2`` or ``.gz``), e.g. Intel Lab, fr079.
+
+Only ``ODOM`` and ``FLASER`` lines are read; other messages (``PARAM``, ``SYNC``, comments)
+are ignored. Messages are not logged in time order (the Intel log steps back in time, by
+up to 0.6 s, about 600 times per message type), so records are sorted by logger timestamp.
+Real logs can also contain truncated lines, so a malformed ``ODOM``/``FLASER`` line is
+skipped, recorded with its line number and reported in one warning per line rather than
+aborting the whole log; a file that cannot be read at all raises :class:`DataError`.
+
+Line formats (whitespace separated; timestamps are the last three fields):
+
+- ``ODOM x y theta tv rv accel ipc_timestamp ipc_hostname logger_timestamp``
+- ``FLASER n r_1 .. r_n x y theta odom_x odom_y odom_theta ipc_timestamp ipc_hostname
+  logger_timestamp``, ``x y theta`` being the laser pose.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from acslam.errors import DataError
+
+NO_RETURN_RANGE_M = 50.0
+"""SICK logs report "no return" as ~80 m; readings at or above this become ``inf``."""
+
+_ODOM_FIELDS = 10
+_FLASER_FIXED_FIELDS = 11  # tag, n, 6 pose values, 3 timestamp fields
+
+
+class CarmenWarning(UserWarning):
+    """A line of a CARMEN log was skipped."""
+
+
+@dataclass(frozen=True)
+class OdometryRecord:
+    """Raw wheel odometry pose (odometry frame) and velocities; ``line`` is 1-based."""
+
+    stamp_s: float
+    pose_xytheta: np.ndarray
+    velocity_mps: float
+    yaw_rate_radps: float
+    line: int
+
+
+@dataclass(frozen=True)
+class LaserRecord:
+    """One front-laser sweep: ranges (m, ``inf`` = no return) at ``angles_rad`` in the
+    laser frame, the laser pose and the robot odometry pose (odometry frame)."""
+
+    stamp_s: float
+    angles_rad: np.ndarray
+    ranges_m: np.ndarray
+    laser_pose_xytheta: np.ndarray
+    odom_pose_xytheta: np.ndarray
+    line: int
+
+
+@dataclass
+class CarmenLog:
+    """Records sorted by logger timestamp (stable, so ties keep file order)."""
+
+    path: Path
+    odometry: list[OdometryRecord] = field(default_factory=list)
+    scans: list[LaserRecord] = field(default_factory=list)
+    skipped_lines: list[tuple[int, str]] = field(default_factory=list)
+
+    @property
+    def records(self) -> list[OdometryRecord | LaserRecord]:
+        """Odometry and laser records merged in time order."""
+        merged: list[OdometryRecord | LaserRecord] = [*self.odometry, *self.scans]
+        merged.sort(key=lambda record: (record.stamp_s, record.line))
+        return merged
+
+
+def _floats(tokens: list[str]) -> np.ndarray:
+    values = np.asarray(tokens, dtype=np.float64)
+    if not np.isfinite(values).all():
+        raise ValueError("non-finite value")
+    return values
+
+
+def _parse_odom(tokens: list[str], line: int) -> OdometryRecord:
+    if len(tokens) != _ODOM_FIELDS:
+        raise ValueError(f"expected {_ODOM_FIELDS} fields, got {len(tokens)}")
+    values = _floats(tokens[1:7] + tokens[9:10])
+    return OdometryRecord(values[6], values[0:3], values[3], values[4], line)
+
+
+def _parse_flaser(tokens: list[str], line: int, fov_rad: float) -> LaserRecord:
+    if len(tokens) < 2 or not tokens[1].isdigit():
+        raise ValueError("missing or non-integer beam count")
+    n = int(tokens[1])
+    if n < 1 or len(tokens) != n + _FLASER_FIXED_FIELDS:
+        raise ValueError(f"expected {n + _FLASER_FIXED_FIELDS} fields, got {len(tokens)}")
+    ranges = _floats(tokens[2 : 2 + n])
+    if (ranges < 0).any():
+        raise ValueError("negative range")
+    poses = _floats(tokens[2 + n : 8 + n])
+    stamp = _floats(tokens[10 + n : 11 + n])[0]
+    ranges[ranges >= NO_RETURN_RANGE_M] = np.inf
+    angles = np.linspace(-fov_rad / 2, fov_rad / 2, n) if n > 1 else np.zeros(1)
+    return LaserRecord(stamp, angles, ranges, poses[0:3], poses[3:6], line)
+
+
+def _open_text(path: Path) -> list[str]:
+    try:
+        if path.name.endswith((".bz2", ".gz")):
+            opener = bz2.open if path.name.endswith(".bz2") else gzip.open
+            with opener(path, "rt", encoding="ascii") as stream:
+                return stream.read().splitlines()
+        return path.read_text(encoding="ascii").splitlines()
+    except FileNotFoundError:
+        raise DataError(path, "log file not found") from None
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
+        raise DataError(path, f"cannot read log ({type(exc).__name__}: {exc})") from None
+
+
+def read_carmen(path: str | Path, fov_rad: float = math.pi) -> CarmenLog:
+    """Read ODOM and FLASER records of a CARMEN log, skipping (and warning about)
+    malformed lines. ``fov_rad``: the laser's field of view, first beam at -fov/2."""
+    path = Path(path)
+    log = CarmenLog(path)
+    for number, text in enumerate(_open_text(path), start=1):
+        tokens = text.split()
+        if not tokens or tokens[0] not in ("ODOM", "FLASER"):
+            continue
+        try:
+            if tokens[0] == "ODOM":
+                log.odometry.append(_parse_odom(tokens, number))
+            else:
+                log.scans.append(_parse_flaser(tokens, number, fov_rad))
+        except ValueError as exc:
+            problem = f"{tokens[0]}: {exc}"
+            log.skipped_lines.append((number, problem))
+            warnings.warn(f"{path}:{number}: skipped {problem}", CarmenWarning, stacklevel=2)
+    log.odometry.sort(key=lambda record: record.stamp_s)
+    log.scans.sort(key=lambda record: record.stamp_s)
+    return log

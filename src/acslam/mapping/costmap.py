@@ -1,0 +1,69 @@
+"""Traversal costmap from an occupancy grid (thesis eqs. 4.35-4.36) plus lethal inflation.
+
+exp is decreasing, so the max over obstacles of C_max exp(-lambda d) (eq. 4.36) equals
+C_max exp(-lambda min d): one Euclidean distance transform replaces the loop over
+obstacle cells, and the same distance field serves the planners.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from acslam.config import CostmapConfig
+from acslam.grid import GridSpec
+from acslam.mapping.occupancy import OCCUPIED, UNKNOWN
+
+LETHAL_COST = math.inf
+"""Cost of cells the robot's footprint cannot occupy (planners treat them as walls)."""
+
+
+@dataclass(frozen=True)
+class Costmap:
+    """Costs on the occupancy grid's cells.
+
+    ``cost``: float64, C_max exp(-lambda d) within ``radius_m`` of an occupied cell, 0
+    beyond; unknown cells at least ``unknown_cost``; :data:`LETHAL_COST` where ``lethal``.
+    ``distance_m``: distance from each cell centre to the nearest occupied cell centre
+    (``inf`` if the map has no occupied cell). ``lethal``: cells within the robot radius
+    (``<=``) of an occupied cell, occupied cells included.
+    """
+
+    spec: GridSpec
+    cost: np.ndarray
+    distance_m: np.ndarray
+    lethal: np.ndarray
+
+
+def compute_costmap(
+    occupancy_values: np.ndarray,
+    spec: GridSpec,
+    config: CostmapConfig,
+    robot_radius_m: float,
+) -> Costmap:
+    """Costmap of OccupancyGrid values (-1 unknown, 0 free, 100 occupied).
+
+    Only occupied cells are obstacles; unknown cells are not, they just cost
+    ``max(decay cost, unknown_cost)`` so planners prefer known space.
+    """
+    values = np.asarray(occupancy_values)
+    if values.shape != spec.shape:
+        raise ValueError(f"occupancy values have shape {values.shape}, grid is {spec.shape}")
+    occupied = values == OCCUPIED
+    if occupied.any():
+        distance_m = ndimage.distance_transform_edt(~occupied, sampling=spec.resolution_m)
+    else:
+        distance_m = np.full(spec.shape, np.inf)
+    # Masked in-place ufuncs: the map is mostly far from obstacles and mostly unknown.
+    near = distance_m <= config.radius_m
+    cost = np.zeros(spec.shape, dtype=np.float64)
+    np.multiply(distance_m, -config.decay_lambda_per_m, out=cost, where=near)
+    np.exp(cost, out=cost, where=near)
+    np.multiply(cost, config.cost_max, out=cost, where=near)
+    np.maximum(cost, config.unknown_cost, out=cost, where=values == UNKNOWN)
+    lethal = distance_m <= robot_radius_m
+    np.copyto(cost, LETHAL_COST, where=lethal)
+    return Costmap(spec, cost, distance_m, lethal)

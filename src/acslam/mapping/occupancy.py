@@ -1,0 +1,425 @@
+"""Log-odds occupancy grids built from posed LiDAR scans (thesis §4.4.3, eqs. 4.25-4.34).
+
+SLAM corrects poses after their scans were integrated, so a scan must be removable at its
+old pose and re-added at the new one. Clamping the log-odds (eq. 4.25 plus [min, max]
+bounds) would make that removal inexact, so a grid keeps an *unclamped* accumulator and
+derives the clamped log-odds from it when read. The accumulator is fixed point (int64 in
+units of 2**-24 log-odds): each scan's update is rounded once, deterministically, and then
+added or subtracted as integers. Integer addition is exact and order independent, so after
+any sequence of corrections the grid is bit-identical to one built from scratch at the
+final poses, and the global map is exactly the sum of the per-robot maps.
+
+The price of the unclamped sum is that a cell seen occupied many times needs as many free
+observations to flip: the grid assumes a static world, which is what the thesis maps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Iterable
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from acslam.config import MappingConfig
+from acslam.grid import GridSpec, bresenham
+
+FIXED_POINT_SCALE = float(2**24)
+"""Accumulator units per log-odds unit (a power of two, so conversion is exact)."""
+
+UNKNOWN, FREE, OCCUPIED = -1, 0, 100
+"""ROS ``OccupancyGrid`` cell values, as in :mod:`acslam.worlds.mapio`."""
+
+_FREE_BIT, _HIT_BIT, _LISTED_BIT = 1, 2, 4
+
+
+def grid_spec_for_bounds(
+    x_min_m: float, y_min_m: float, x_max_m: float, y_max_m: float, resolution_m: float
+) -> GridSpec:
+    """Smallest grid at ``resolution_m`` whose cells cover the rectangle of the bounds."""
+    if not (x_max_m > x_min_m and y_max_m > y_min_m and resolution_m > 0):
+        raise ValueError("bounds must have x_max > x_min, y_max > y_min and resolution > 0")
+    cols = math.ceil((x_max_m - x_min_m) / resolution_m - 1e-9)
+    rows = math.ceil((y_max_m - y_min_m) / resolution_m - 1e-9)
+    return GridSpec(float(x_min_m), float(y_min_m), float(resolution_m), rows, cols)
+
+
+def _logit(probability: float) -> float:
+    if probability <= 0.0:
+        return -math.inf
+    if probability >= 1.0:
+        return math.inf
+    return math.log(probability / (1.0 - probability))
+
+
+@dataclass(frozen=True)
+class ScanUpdate:
+    """Sparse change one posed scan makes: unique flat cell indices and fixed-point deltas.
+
+    Computed once and applied to several grids (global and per-robot), which is why it is
+    separate from :meth:`LogOddsGrid.apply`.
+    """
+
+    grid_shape: tuple[int, int]
+    flat_indices: np.ndarray
+    increments_fixed: np.ndarray
+
+    def log_odds_increments(self) -> np.ndarray:
+        """The increments in log-odds units (for inspection and tests)."""
+        return self.increments_fixed / FIXED_POINT_SCALE
+
+
+@numba.njit(cache=True)
+def _scan_update(
+    ranges: np.ndarray,
+    angles: np.ndarray,
+    x_m: float,
+    y_m: float,
+    theta_rad: float,
+    origin_x_m: float,
+    origin_y_m: float,
+    resolution_m: float,
+    state: np.ndarray,
+    hit_weight: np.ndarray,
+    range_max_m: float,
+    free_on_no_return: bool,
+    delta_free: float,
+    delta_occ: float,
+    alpha_per_m: float,
+    kernel_rows: np.ndarray,
+    kernel_cols: np.ndarray,
+    kernel_weights: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rasterise one scan; ``state``/``hit_weight`` are zeroed scratch grids, left zeroed."""
+    rows, cols = state.shape
+    n = ranges.shape[0]
+    r0 = int(np.floor((y_m - origin_y_m) / resolution_m))
+    c0 = int(np.floor((x_m - origin_x_m) / resolution_m))
+    end_r = np.empty(n, np.int64)
+    end_c = np.empty(n, np.int64)
+    used = np.zeros(n, np.bool_)
+    hit = np.zeros(n, np.bool_)
+    max_cells = int(range_max_m / resolution_m) + 3
+    listed = np.empty(n * (max_cells + kernel_rows.shape[0]) + 1, np.int64)
+    count = 0
+
+    # Pass 1: beam endpoints. Endpoint cells are marked first so that no beam of the same
+    # scan clears them (a grazing neighbour beam must not erase a hit).
+    for b in range(n):
+        rng = ranges[b]
+        if rng <= range_max_m:
+            length = rng
+            hit[b] = True
+        elif np.isinf(rng) and not free_on_no_return:
+            continue
+        else:
+            length = range_max_m
+        used[b] = True
+        a = theta_rad + angles[b]
+        end_r[b] = int(np.floor((y_m + length * np.sin(a) - origin_y_m) / resolution_m))
+        end_c[b] = int(np.floor((x_m + length * np.cos(a) - origin_x_m) / resolution_m))
+        r, c = end_r[b], end_c[b]
+        if hit[b] and 0 <= r < rows and 0 <= c < cols:
+            if state[r, c] == 0:
+                listed[count] = r * cols + c
+                count += 1
+            state[r, c] |= _HIT_BIT
+
+    # Pass 2: free cells along each beam (eq. 4.33), endpoint excluded.
+    for b in range(n):
+        if not used[b]:
+            continue
+        line = bresenham(r0, c0, end_r[b], end_c[b])
+        for i in range(line.shape[0] - 1):
+            r, c = line[i, 0], line[i, 1]
+            if 0 <= r < rows and 0 <= c < cols and (state[r, c] & _HIT_BIT) == 0:
+                if state[r, c] == 0:
+                    listed[count] = r * cols + c
+                    count += 1
+                state[r, c] |= _FREE_BIT
+
+    # Pass 3: Gaussian kernel around each endpoint (eq. 4.34), max over the scan's beams.
+    for b in range(n):
+        if not hit[b]:
+            continue
+        for k in range(kernel_rows.shape[0]):
+            r = end_r[b] + kernel_rows[k]
+            c = end_c[b] + kernel_cols[k]
+            if 0 <= r < rows and 0 <= c < cols and kernel_weights[k] > hit_weight[r, c]:
+                if state[r, c] == 0:
+                    listed[count] = r * cols + c
+                    count += 1
+                state[r, c] |= _LISTED_BIT
+                hit_weight[r, c] = kernel_weights[k]
+
+    # Pass 4: distance-weighted increments, rounded once to fixed point; scratch reset.
+    flat_out = np.empty(count, np.int64)
+    delta_out = np.empty(count, np.int64)
+    m = 0
+    for i in range(count):
+        flat = listed[i]
+        r = flat // cols
+        c = flat - r * cols
+        d = np.hypot(
+            origin_x_m + (c + 0.5) * resolution_m - x_m,
+            origin_y_m + (r + 0.5) * resolution_m - y_m,
+        )
+        falloff = max(0.0, 1.0 - alpha_per_m * d)
+        delta = delta_occ * hit_weight[r, c] * falloff
+        if (state[r, c] & _FREE_BIT) != 0:
+            delta += delta_free * falloff
+        fixed = np.int64(np.floor(delta * FIXED_POINT_SCALE + 0.5))
+        state[r, c] = 0
+        hit_weight[r, c] = 0.0
+        if fixed != 0:
+            flat_out[m] = flat
+            delta_out[m] = fixed
+            m += 1
+    return flat_out[:m], delta_out[:m]
+
+
+class LogOddsGrid:
+    """Occupancy grid in the world frame on a fixed :class:`GridSpec` (eqs. 4.25-4.26).
+
+    Per scan, each cell gets at most one update: an endpoint cell of any beam gets the
+    occupied update only; a cell crossed by a beam gets one free update (4.33) plus, if it
+    lies within ``hit_radius_m`` of an endpoint, the largest Gaussian occupied update
+    (4.34) of the scan's endpoints. Both are weighted by ``max(0, 1 - alpha d)`` with d the
+    distance from the sensor to the cell centre. Counting each cell once per scan keeps the
+    many overlapping beams near the sensor from dominating the map.
+    """
+
+    def __init__(
+        self, spec: GridSpec, config: MappingConfig, accumulator: np.ndarray | None = None
+    ) -> None:
+        self.spec = spec
+        self.config = config
+        if accumulator is None:
+            accumulator = np.zeros(spec.shape, dtype=np.int64)
+        elif accumulator.shape != spec.shape or accumulator.dtype != np.int64:
+            raise ValueError(f"accumulator must be int64 of shape {spec.shape}")
+        self._accumulator = accumulator
+        self._scratch: tuple[np.ndarray, np.ndarray] | None = None
+        reach_cells = config.hit_radius_m / spec.resolution_m
+        span = math.floor(reach_cells + 1e-9)
+        dr, dc = np.mgrid[-span : span + 1, -span : span + 1]
+        inside = (dr**2 + dc**2) <= reach_cells**2 + 1e-9
+        self._kernel_rows = dr[inside].astype(np.int64)
+        self._kernel_cols = dc[inside].astype(np.int64)
+        sq_dist_m2 = (dr[inside] ** 2 + dc[inside] ** 2) * spec.resolution_m**2
+        self._kernel_weights = np.exp(-sq_dist_m2 / (2.0 * config.hit_sigma_m**2))
+        self._occupied_log_odds = _logit(config.occupied_probability)
+        self._free_log_odds = _logit(config.free_probability)
+
+    @classmethod
+    def for_bounds(
+        cls,
+        x_min_m: float,
+        y_min_m: float,
+        x_max_m: float,
+        y_max_m: float,
+        config: MappingConfig,
+    ) -> LogOddsGrid:
+        """Empty grid covering the given world rectangle at ``config.resolution_m``."""
+        spec = grid_spec_for_bounds(x_min_m, y_min_m, x_max_m, y_max_m, config.resolution_m)
+        return cls(spec, config)
+
+    @property
+    def accumulator_fixed(self) -> np.ndarray:
+        """Unclamped log-odds sum in fixed-point units (read-only view)."""
+        view = self._accumulator.view()
+        view.flags.writeable = False
+        return view
+
+    def scan_update(
+        self,
+        scan_ranges: np.ndarray,
+        scan_angles: np.ndarray,
+        sensor_pose_xytheta: np.ndarray,
+        range_max_m: float = math.inf,
+    ) -> ScanUpdate:
+        """Change one scan makes; a pure function of its arguments (needed for removal).
+
+        ``ranges`` in metres with ``inf`` = no return, ``angles`` in the sensor frame,
+        ``sensor_pose_xytheta`` in the world frame. Beams are used up to
+        ``min(range_max_m, config.max_range_m)``; longer ones only clear free space.
+        """
+        ranges = np.ascontiguousarray(scan_ranges, dtype=np.float64)
+        angles = np.ascontiguousarray(scan_angles, dtype=np.float64)
+        if ranges.ndim != 1 or ranges.shape != angles.shape:
+            raise ValueError("scan_ranges and scan_angles must be (N,) of equal length")
+        if np.isnan(ranges).any() or (ranges < 0).any():
+            raise ValueError("scan_ranges must be >= 0 or +inf (no return), never NaN")
+        x_m, y_m, theta_rad = (float(v) for v in np.asarray(sensor_pose_xytheta).reshape(3))
+        if self._scratch is None:
+            self._scratch = (
+                np.zeros(self.spec.shape, dtype=np.uint8),
+                np.zeros(self.spec.shape, dtype=np.float64),
+            )
+        cfg = self.config
+        flat, increments = _scan_update(
+            ranges,
+            angles,
+            x_m,
+            y_m,
+            theta_rad,
+            self.spec.origin_x_m,
+            self.spec.origin_y_m,
+            self.spec.resolution_m,
+            self._scratch[0],
+            self._scratch[1],
+            min(float(range_max_m), cfg.max_range_m),
+            cfg.free_on_no_return,
+            cfg.delta_free,
+            cfg.delta_occ,
+            cfg.distance_alpha_per_m,
+            self._kernel_rows,
+            self._kernel_cols,
+            self._kernel_weights,
+        )
+        return ScanUpdate(self.spec.shape, flat, increments)
+
+    def apply(self, update: ScanUpdate, sign: int = 1) -> None:
+        """Add (``sign=+1``) or exactly remove (``sign=-1``) a scan update."""
+        if sign not in (1, -1):
+            raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+        if update.grid_shape != self.spec.shape:
+            raise ValueError("scan update was computed for a grid of another shape")
+        self._accumulator.reshape(-1)[update.flat_indices] += sign * update.increments_fixed
+
+    def integrate(
+        self,
+        scan_ranges: np.ndarray,
+        scan_angles: np.ndarray,
+        sensor_pose_xytheta: np.ndarray,
+        sign: int = 1,
+        range_max_m: float = math.inf,
+    ) -> None:
+        """Integrate one posed scan (``sign=-1`` removes it exactly)."""
+        self.apply(
+            self.scan_update(scan_ranges, scan_angles, sensor_pose_xytheta, range_max_m), sign
+        )
+
+    def log_odds(self) -> np.ndarray:
+        """Clamped log-odds L of every cell (float64)."""
+        return np.clip(
+            self._accumulator * (1.0 / FIXED_POINT_SCALE),
+            self.config.log_odds_min,
+            self.config.log_odds_max,
+        )
+
+    def probabilities(self) -> np.ndarray:
+        """Occupancy probability 1 / (1 + exp(-L)) of every cell (eq. 4.26)."""
+        return 1.0 / (1.0 + np.exp(-self.log_odds()))
+
+    def to_occupancy_values(self) -> np.ndarray:
+        """int8 OccupancyGrid values: 100 if p >= occupied_probability, 0 if p <=
+        free_probability, -1 otherwise (compared in log-odds, the same test)."""
+        log_odds = self.log_odds()
+        values = np.full(self.spec.shape, UNKNOWN, dtype=np.int8)
+        values[log_odds <= self._free_log_odds] = FREE
+        values[log_odds >= self._occupied_log_odds] = OCCUPIED
+        return values
+
+    def known_mask(self) -> np.ndarray:
+        """Cells classified free or occupied (the coverage of the map)."""
+        log_odds = self.log_odds()
+        return (log_odds <= self._free_log_odds) | (log_odds >= self._occupied_log_odds)
+
+
+@dataclass(frozen=True)
+class _PosedScan:
+    robot_id: int
+    ranges: np.ndarray
+    angles: np.ndarray
+    pose: np.ndarray
+    range_max_m: float
+
+
+class TeamMap:
+    """The global map fused from all robots plus one map per robot, kept in step.
+
+    Every scan is stored by key with its current pose so that :meth:`move_scan` can remove
+    it at the old pose and re-add it at the new one in the global grid and in its robot's
+    grid. Because accumulators are exact integers, the global grid always equals the sum
+    of the robot grids, so the map of any robot combination is available (:meth:`combined`).
+    """
+
+    def __init__(self, spec: GridSpec, config: MappingConfig) -> None:
+        self.spec = spec
+        self.config = config
+        self.global_grid = LogOddsGrid(spec, config)
+        self._robot_grids: dict[int, LogOddsGrid] = {}
+        self._scans: dict[Hashable, _PosedScan] = {}
+
+    def __len__(self) -> int:
+        return len(self._scans)
+
+    def __contains__(self, scan_key: Hashable) -> bool:
+        return scan_key in self._scans
+
+    @property
+    def robot_ids(self) -> list[int]:
+        return sorted(self._robot_grids)
+
+    def robot_grid(self, robot_id: int) -> LogOddsGrid:
+        """The map built from this robot's scans only (empty if it has none yet)."""
+        if robot_id not in self._robot_grids:
+            self._robot_grids[robot_id] = LogOddsGrid(self.spec, self.config)
+        return self._robot_grids[robot_id]
+
+    def scan_pose(self, scan_key: Hashable) -> np.ndarray:
+        """Current sensor pose ``[x, y, theta]`` of a stored scan."""
+        return self._scans[scan_key].pose.copy()
+
+    def _apply(self, scan: _PosedScan, pose: np.ndarray, sign: int) -> None:
+        update = self.global_grid.scan_update(scan.ranges, scan.angles, pose, scan.range_max_m)
+        self.global_grid.apply(update, sign)
+        self.robot_grid(scan.robot_id).apply(update, sign)
+
+    def add_scan(
+        self,
+        robot_id: int,
+        scan_key: Hashable,
+        ranges: np.ndarray,
+        angles: np.ndarray,
+        pose: np.ndarray,
+        range_max_m: float = math.inf,
+    ) -> None:
+        """Integrate a scan taken at sensor ``pose`` and remember it under ``scan_key``."""
+        if scan_key in self._scans:
+            raise KeyError(f"scan {scan_key!r} was already added")
+        scan = _PosedScan(
+            int(robot_id),
+            np.array(ranges, dtype=np.float64),
+            np.array(angles, dtype=np.float64),
+            np.array(pose, dtype=np.float64).reshape(3),
+            float(range_max_m),
+        )
+        self._apply(scan, scan.pose, 1)
+        self._scans[scan_key] = scan
+
+    def move_scan(self, scan_key: Hashable, new_pose: np.ndarray) -> None:
+        """Re-place a scan after a pose correction: exact removal at the old pose, then add."""
+        scan = self._scans[scan_key]
+        pose = np.array(new_pose, dtype=np.float64).reshape(3)
+        if np.array_equal(pose, scan.pose):
+            return
+        self._apply(scan, scan.pose, -1)
+        moved = _PosedScan(scan.robot_id, scan.ranges, scan.angles, pose, scan.range_max_m)
+        self._apply(moved, pose, 1)
+        self._scans[scan_key] = moved
+
+    def remove_scan(self, scan_key: Hashable) -> None:
+        """Take a scan out of every grid it is in."""
+        scan = self._scans.pop(scan_key)
+        self._apply(scan, scan.pose, -1)
+
+    def combined(self, robot_ids: Iterable[int]) -> LogOddsGrid:
+        """Map fused from the scans of the given robots only (a new, independent grid)."""
+        total = np.zeros(self.spec.shape, dtype=np.int64)
+        for robot_id in robot_ids:
+            if robot_id in self._robot_grids:
+                total += self._robot_grids[robot_id].accumulator_fixed
+        return LogOddsGrid(self.spec, self.config, total)

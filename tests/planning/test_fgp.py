@@ -1,0 +1,135 @@
+"""FGP: custom-factor Jacobians, head-on swap of two robots, bypass of an obstacle."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from acslam.config import PlanningConfig, RobotsConfig
+from acslam.grid import GridSpec
+from acslam.planning.astar import lookahead_point, plan_path
+from acslam.planning.fgp import FactorGraphPlanner, obstacle_error, robot_error
+from acslam.planning.field import DistanceField, RobotState
+from acslam.sim.kinematics import limit_command, step_pose
+
+ROBOTS = RobotsConfig()
+PLANNING = PlanningConfig()
+SIM_DT_S = 0.02
+
+
+def disc_world(center_xy_m: tuple[float, float], radius_m: float) -> tuple[GridSpec, np.ndarray]:
+    grid = GridSpec(-3.0, -2.0, 0.05, 80, 120)
+    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape))).reshape(*grid.shape, 2)
+    occupied = np.linalg.norm(centres - np.array(center_xy_m), axis=-1) < radius_m
+    return grid, ndimage.distance_transform_edt(~occupied) * grid.resolution_m
+
+
+def numeric_jacobian(fn, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    cols = []
+    for k in range(len(x)):
+        dx = np.zeros_like(x)
+        dx[k] = h
+        cols.append((fn(x + dx) - fn(x - dx)) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_obstacle_jacobian_matches_central_differences(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    grid = GridSpec(0.0, 0.0, 0.05, 40, 40)
+    occupied = ndimage.binary_dilation(rng.random(grid.shape) < 0.01, iterations=2)
+    field = DistanceField(ndimage.distance_transform_edt(~occupied) * 0.05, grid)
+    checked = 0
+    for _ in range(40):
+        state = np.concatenate([rng.uniform(0.1, 1.9, 2), rng.normal(size=2)])
+        error, jacobian = obstacle_error(state, field, PLANNING.obstacle_influence_m)
+        if error[0] == 0.0:
+            continue
+        numeric = numeric_jacobian(
+            lambda x: obstacle_error(x, field, PLANNING.obstacle_influence_m)[0], state
+        )
+        np.testing.assert_allclose(jacobian, numeric, atol=1e-6)
+        checked += 1
+    assert checked >= 5
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_robot_jacobian_matches_central_differences(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    influence = PLANNING.robot_influence_m
+    for _ in range(20):
+        a = np.concatenate([rng.uniform(-0.3, 0.3, 2), rng.normal(size=2)])
+        b = np.concatenate([rng.uniform(-0.3, 0.3, 2), rng.normal(size=2)])
+        error, jac_a, jac_b = robot_error(a, b, influence)
+        assert error[0] == pytest.approx(max(0.0, 1 - np.linalg.norm(a[:2] - b[:2]) / influence))
+        np.testing.assert_allclose(
+            jac_a, numeric_jacobian(lambda x, b=b: robot_error(x, b, influence)[0], a), atol=1e-6
+        )
+        np.testing.assert_allclose(
+            jac_b, numeric_jacobian(lambda x, a=a: robot_error(a, x, influence)[0], b), atol=1e-6
+        )
+
+
+def drive(
+    planner: FactorGraphPlanner,
+    poses: list[tuple[float, float, float]],
+    paths: list[np.ndarray],
+    field: DistanceField,
+    duration_s: float,
+) -> np.ndarray:
+    """Closed loop: plan every control period, integrate diff-drive in between.
+
+    Returns the (T, R, 3) poses and checks every command against the limits.
+    """
+    velocities = [(0.0, 0.0)] * len(poses)
+    substeps = round(PLANNING.control_period_s / SIM_DT_S)
+    dv = ROBOTS.max_acc_v_mps2 * PLANNING.control_period_s
+    history = []
+    for _ in range(round(duration_s / PLANNING.control_period_s)):
+        states = [RobotState(*p, *v) for p, v in zip(poses, velocities, strict=True)]
+        lookahead_m = PLANNING.horizon_s * ROBOTS.max_v_mps
+        goals = [
+            lookahead_point(path, s.xy_m, lookahead_m)
+            for path, s in zip(paths, states, strict=True)
+        ]
+        result = planner.plan(states, goals, field)
+        for r, (v, omega) in enumerate(result.commands):
+            assert 0.0 <= v <= ROBOTS.max_v_mps and abs(v - velocities[r][0]) <= dv + 1e-12
+            assert abs(omega) <= ROBOTS.max_omega_radps
+            for _ in range(substeps):
+                velocities[r] = limit_command(v, omega, *velocities[r], ROBOTS, SIM_DT_S)
+                poses[r] = step_pose(*poses[r], *velocities[r], SIM_DT_S)
+            history.append(poses[r])
+    return np.array(history).reshape(-1, len(poses), 3)
+
+
+def test_two_robots_head_on_swap_positions_without_contact() -> None:
+    grid = GridSpec(-4.0, -4.0, 0.05, 160, 160)
+    field = DistanceField(np.full(grid.shape, 10.0), grid)
+    starts = [(-2.0, 0.0, 0.0), (2.0, 0.0, math.pi)]
+    goals = [np.array([2.0, 0.0]), np.array([-2.0, 0.0])]
+    paths = [np.array([s[:2], g]) for s, g in zip(starts, goals, strict=True)]
+    history = drive(FactorGraphPlanner(PLANNING, ROBOTS), list(starts), paths, field, 30.0)
+    separation = np.linalg.norm(history[:, 0, :2] - history[:, 1, :2], axis=1)
+    assert separation.min() >= 2 * ROBOTS.radius_m
+    for r in range(2):
+        assert np.linalg.norm(history[-1, r, :2] - goals[r]) < 0.15
+
+
+def test_single_robot_goes_around_an_obstacle_hugged_by_the_global_path() -> None:
+    grid, distance = disc_world((0.0, 0.0), 0.3)
+    field = DistanceField(distance, grid)
+    lethal = distance < ROBOTS.radius_m + 0.02
+    start, goal = np.array([-2.0, 0.0]), np.array([2.0, 0.0])
+    # Cost weight 0: the shortest path grazes the lethal band, the FGP must keep clear.
+    path = plan_path(np.zeros(grid.shape), lethal, grid, start, goal, 0.0, 0.2, True)
+    assert float(field.value(path.points_m).min()) < 0.2
+    history = drive(
+        FactorGraphPlanner(PLANNING, ROBOTS), [(-2.0, 0.0, 0.0)], [path.points_m], field, 30.0
+    )
+    clearance = np.linalg.norm(history[:, 0, :2], axis=1) - 0.3
+    assert clearance.min() > ROBOTS.radius_m
+    assert np.linalg.norm(history[-1, 0, :2] - goal) < 0.15
