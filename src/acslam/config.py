@@ -307,15 +307,41 @@ class ExplorationConfig(Section):
     dbscan_eps_m: PositiveFloat = 0.3
     dbscan_min_points: Annotated[int, Field(ge=1)] = 5
     min_cluster_size: Annotated[int, Field(ge=1)] = 5
+    # Information gain = unknown cells within this radius of a cluster's target cell: the
+    # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
+    information_gain_radius_m: PositiveFloat = 8.0
 
 
 class AllocationConfig(Section):
     """Frontier-to-robot assignment (thesis §4.6, eqs. 4.37-4.42)."""
 
     method: Literal["factor-graph", "hungarian", "greedy", "thesis"] = "factor-graph"
+    # Unary log-factor -alpha d + beta s (eq. 4.40): alpha per metre of travel, beta per
+    # frontier cell, so with these values 20 frontier cells (1 m at 0.05 m) are worth 1 m.
     alpha: NonNegativeFloat = 1.0
     beta: NonNegativeFloat = 0.05
+    # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
+    # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
+    # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
+    # sharing whenever there are enough clusters.
     conflict_lambda: FiniteFloat = 0.01
+    # d of eq. 4.40: "path" = costmap path length from one Dijkstra per robot (walls
+    # respected; unreachable clusters excluded), "euclidean" = straight line (reachability
+    # still checked). The "thesis" method always uses the straight line, unchecked.
+    distance_metric: Literal["path", "euclidean"] = "path"
+    # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
+    # metres, the unit alpha is stated in.
+    path_cost_weight: NonNegativeFloat = 0.0
+    # s of eq. 4.40: the cluster's frontier cells ("size"), or the unknown cells within
+    # sensor range of its target ("information_gain", scale beta down accordingly).
+    utility: Literal["size", "information_gain"] = "size"
+    # A robot localised in a lethal cell (inflation band) starts from the nearest free
+    # cell within this radius, as in PlanningConfig.astar_max_snap_m.
+    start_snap_m: NonNegativeFloat = 0.5
+    # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
+    # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
+    # (~50 ms) the approximate solver (greedy + pairwise local repair) is used.
+    exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
 
 
 class PlanningConfig(Section):
@@ -361,6 +387,7 @@ class PlanningConfig(Section):
     fgp_goal_sigma_m: PositiveFloat = 0.2  # moderate: the goal may yield to obstacles
     fgp_obstacle_sigma: PositiveFloat = 0.1  # unitless error 1 - d / d_max
     fgp_robot_sigma: PositiveFloat = 0.05  # unitless error 1 - d / d_max
+    # Cap on Levenberg-Marquardt linear solves per cycle (accepted and rejected steps).
     fgp_max_iterations: Annotated[int, Field(ge=1)] = 20
     # Sideways nudge of the initial guess when another robot is dead ahead: a symmetric
     # head-on meeting is a saddle of eq. 4.69 where both robots would stop; both keep right.
@@ -368,6 +395,14 @@ class PlanningConfig(Section):
     stuck_timeout_s: PositiveFloat = 10.0
     # Less than this gain in distance to the goal over stuck_timeout_s is "no progress".
     stuck_min_progress_m: PositiveFloat = 0.1
+    # Recovery after a stuck event: reverse this far at this speed (the robot came in
+    # forward, so the way back is free), then replan A* with the cost raised by
+    # recovery_penalty_cost within recovery_penalty_radius_m of where it got stuck
+    # (~ the size of a dead end a local planner falls into).
+    recovery_back_off_m: PositiveFloat = 0.25
+    recovery_back_off_mps: PositiveFloat = 0.1
+    recovery_penalty_radius_m: PositiveFloat = 0.6
+    recovery_penalty_cost: NonNegativeFloat = 10.0
 
 
 class AlgorithmsConfig(Section):

@@ -1,0 +1,45 @@
+"""Figures of SLAM runs on logged datasets (matplotlib lives only under acslam.eval)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from acslam.eval.figures import robot_colour
+
+
+def plot_slam_run(
+    path: Path,
+    truth: dict[int, np.ndarray],
+    slam: dict[int, np.ndarray],
+    dead_reckoning: dict[int, np.ndarray],
+    landmark_truth: np.ndarray,
+    landmark_estimate: np.ndarray,
+    title: str,
+) -> None:
+    """Trajectories ((N, 3) per robot: truth solid thin, SLAM solid, dead reckoning dashed)
+    and landmarks (truth crosses, estimates circles) on one top-down plot."""
+    fig, ax = plt.subplots(figsize=(9, 7))
+    for robot in sorted(truth):
+        colour = robot_colour(robot)
+        ax.plot(*truth[robot][:, :2].T, color="0.6", lw=0.6)
+        ax.plot(*dead_reckoning[robot][:, :2].T, color=colour, lw=0.8, ls="--", alpha=0.6)
+        ax.plot(*slam[robot][:, :2].T, color=colour, lw=1.2, label=f"robot {robot}")
+    if len(landmark_truth):
+        ax.plot(*landmark_truth[:, :2].T, "kx", ms=8, label="landmark truth")
+    if len(landmark_estimate):
+        ax.plot(*landmark_estimate[:, :2].T, "o", mfc="none", mec="k", ms=6, label="estimate")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,130 @@
+"""Factors and noise models of the SLAM graph, and planar <-> SE(3) conversions.
+
+Poses are ``gtsam.Pose3`` as in thesis eq. 4.7; the robots are planar, so every prior and
+odometry factor carries a tight ``planar_sigma`` on z, roll and pitch. GTSAM orders the
+Pose3 tangent as ``[roll, pitch, yaw, x, y, z]`` (rotation first), in the body frame.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+
+import gtsam
+import numpy as np
+
+from acslam.config import SlamConfig
+
+
+def planar_to_pose3(pose: np.ndarray) -> gtsam.Pose3:
+    """``[x, y, theta]`` -> Pose3 at z = 0 rotated about z."""
+    return gtsam.Pose3(gtsam.Rot3.Rz(float(pose[2])), gtsam.Point3(pose[0], pose[1], 0.0))
+
+
+def pose3_to_planar(pose: gtsam.Pose3) -> np.ndarray:
+    """Pose3 -> ``[x, y, yaw]`` (z, roll and pitch dropped)."""
+    t = pose.translation()
+    return np.array([t[0], t[1], pose.rotation().yaw()])
+
+
+def prior_noise(config: SlamConfig) -> gtsam.noiseModel.Base:
+    """Known start pose: small sigmas in the plane, ``planar_sigma`` off it."""
+    p, xy, th = config.planar_sigma, config.prior_sigma_xy_m, config.prior_sigma_theta_rad
+    return gtsam.noiseModel.Diagonal.Sigmas(np.array([p, p, th, xy, xy, p]))
+
+
+def odometry_sigmas(config: SlamConfig, distance_m: float, angle_rad: float) -> np.ndarray:
+    """Planar ``[sigma_x, sigma_y, sigma_theta]`` of an odometry increment.
+
+    Grows linearly with the path length and the absolute turn travelled (the increment is
+    a sum of independent small steps, so linear in std is conservative against the
+    sqrt a random walk would give; it also covers the correlated bias of real odometry).
+    """
+    sigma_xy = max(config.odom_sigma_min_xy_m, config.odom_sigma_xy_per_m * distance_m)
+    sigma_theta = max(
+        config.odom_sigma_min_theta_rad,
+        config.odom_sigma_theta_per_rad * angle_rad + config.odom_sigma_theta_per_m * distance_m,
+    )
+    return np.array([sigma_xy, sigma_xy, sigma_theta])
+
+
+def odometry_noise(
+    config: SlamConfig, distance_m: float, angle_rad: float
+) -> gtsam.noiseModel.Base:
+    """Noise of a BetweenFactorPose3 between consecutive keyframes."""
+    sxy, _, sth = odometry_sigmas(config, distance_m, angle_rad)
+    p = config.planar_sigma
+    return gtsam.noiseModel.Diagonal.Sigmas(np.array([p, p, sth, sxy, sxy, p]))
+
+
+def sensor_covariance(config: SlamConfig, point: np.ndarray) -> np.ndarray:
+    """3x3 covariance of an observed point (robot frame): isotropic + radial + angular."""
+    cov = np.eye(3) * config.landmark_sigma_m**2
+    distance = float(np.linalg.norm(point))
+    if distance > 0.0:
+        ray = np.outer(point, point) / distance**2
+        cov += config.landmark_radial_sigma_m**2 * ray
+        cov += (distance * config.landmark_angular_sigma_rad) ** 2 * (np.eye(3) - ray)
+    return cov
+
+
+def observation_noise(
+    covariance: np.ndarray, probability: float, huber_k: float
+) -> gtsam.noiseModel.Base:
+    """Huber-robust Gaussian noise of an observation, weighted by its association probability.
+
+    A soft association with probability ``p`` enters as a factor whose information is
+    ``p * Sigma^-1`` (covariance ``Sigma / p``), so its pull on the estimate scales with p.
+    """
+    if not 0.0 < probability <= 1.0:
+        raise ValueError(f"association probability must be in (0, 1], got {probability}")
+    gaussian = gtsam.noiseModel.Gaussian.Covariance(np.asarray(covariance) / probability)
+    return gtsam.noiseModel.Robust.Create(
+        gtsam.noiseModel.mEstimator.Huber.Create(huber_k), gaussian
+    )
+
+
+def _observation_error(
+    measured: np.ndarray,
+    this: gtsam.CustomFactor,
+    values: gtsam.Values,
+    jacobians: list[np.ndarray] | None,
+) -> np.ndarray:
+    """e = R_i^T (l_j - t_i) - z: the predicted landmark in the robot frame minus the measurement.
+
+    Thesis eq. 4.13 writes e = l_j - t_i, which drops both the measurement z and the
+    robot's rotation R_i; that residual is not zero at the true configuration unless the
+    robot sits at the origin unrotated, so we use the full model. The Jacobians come from
+    Pose3.transformTo, i.e. in GTSAM's own Pose3 chart, which is what iSAM2 retracts with.
+    """
+    keys = this.keys()
+    pose = values.atPose3(keys[0])
+    landmark = values.atPoint3(keys[1])
+    if jacobians is None:
+        return pose.transformTo(landmark) - measured
+    h_pose = np.zeros((3, 6), order="F")
+    h_landmark = np.zeros((3, 3), order="F")
+    predicted = pose.transformTo(landmark, h_pose, h_landmark)
+    jacobians[0] = h_pose
+    jacobians[1] = h_landmark
+    return predicted - measured
+
+
+def observation_factor(
+    pose_key: int, landmark_key: int, measured: np.ndarray, noise: gtsam.noiseModel.Base
+) -> gtsam.CustomFactor:
+    """Landmark ``measured`` (3D point, robot frame) seen from pose ``pose_key``."""
+    measured = np.asarray(measured, dtype=float).reshape(3)
+    return gtsam.CustomFactor(
+        noise, [pose_key, landmark_key], partial(_observation_error, measured)
+    )
+
+
+def planar_compose_jacobians(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Jacobians of SE(2) ``a * b`` w.r.t. ``a`` and ``b`` (world-frame [x, y, theta])."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    ja = np.array(
+        [[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]]
+    )
+    jb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return ja, jb

@@ -1,0 +1,64 @@
+"""PDA (eqs. 4.21-4.24) against hand-computed values."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from acslam.slam.association import euclidean_gate, gaussian_likelihood, score_candidates
+
+LANDMARKS = np.array(
+    [
+        [0.2, 0.0, 0.0],  # d = (0.2, 0, 0): D = 1 with S = 0.04 I
+        [0.0, 0.4, 0.0],  # D = 2
+        [1.5, 0.0, 0.0],  # outside the 1 m Euclidean gate
+        [0.0, 0.0, 0.8],  # inside the gate, but D^2 = 16 > 11.34
+    ]
+)
+POINT_COV = 0.01 * np.eye(3)
+LANDMARK_COV = 0.03 * np.eye(3)
+NORM = (2 * math.pi) ** 1.5 * 0.04**1.5  # sqrt((2 pi)^3 |0.04 I|)
+
+
+def _score(min_likelihood: float):
+    gated = euclidean_gate(np.zeros(3), LANDMARKS, 1.0)
+    covs = np.repeat(LANDMARK_COV[None], len(gated), axis=0)
+    return gated, score_candidates(
+        np.zeros(3), POINT_COV, gated, LANDMARKS[gated], covs, 11.34, min_likelihood
+    )
+
+
+def test_gates_and_probabilities() -> None:
+    gated, cands = _score(0.0)
+    assert list(gated) == [0, 1, 3]
+    assert list(cands.indices) == [0, 1]
+    np.testing.assert_allclose(cands.mahalanobis, [1.0, 2.0])
+    np.testing.assert_allclose(cands.likelihood, [math.exp(-0.5) / NORM, math.exp(-2) / NORM])
+    p0 = 1.0 / (1.0 + math.exp(-1.5))
+    np.testing.assert_allclose(cands.probability, [p0, 1 - p0])
+
+
+def test_likelihood_floor_drops_the_weaker_candidate() -> None:
+    floor = 0.5 * (math.exp(-0.5) + math.exp(-2)) / NORM
+    _, cands = _score(floor)
+    assert list(cands.indices) == [0]
+    np.testing.assert_allclose(cands.probability, [1.0])
+
+
+def test_mahalanobis_and_density_of_a_correlated_covariance() -> None:
+    cov = np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]])
+    d = np.array([1.0, -1.0, 0.0])
+    # cov^-1 on (1, -1, 0) = (1, -1, 0) / (2 - 1) -> d^T cov^-1 d = 2; |cov| = 3.
+    dist, like = gaussian_likelihood(d, cov)
+    assert dist == pytest.approx(math.sqrt(2.0))
+    assert like == pytest.approx(math.exp(-1.0) / math.sqrt((2 * math.pi) ** 3 * 3.0))
+
+
+def test_no_landmarks_no_candidates() -> None:
+    assert len(euclidean_gate(np.zeros(3), np.zeros((0, 3)), 1.0)) == 0
+    cands = score_candidates(
+        np.zeros(3), POINT_COV, np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3, 3)), 11.0, 0.0
+    )
+    assert len(cands) == 0

@@ -1,0 +1,193 @@
+"""The back end on small synthetic multi-robot problems built directly from messages."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from acslam.config import SlamConfig
+from acslam.geometry import between, compose
+from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
+from acslam.slam import SlamBackend, SlamError
+
+DT = 0.1
+# Landmarks on a 1.5 m lattice: far apart relative to the 1 m gate and 3 cm noise, so the
+# association is unambiguous and the test is about the estimator.
+LANDMARKS = np.array(
+    [[x, y, 0.3] for x in np.arange(-1.5, 7.6, 1.5) for y in np.arange(-3.0, 3.1, 1.5)]
+)
+SENSOR_RANGE_M = 2.5
+
+
+def _circle_truth(start: np.ndarray, v: float, omega: float, steps: int) -> np.ndarray:
+    poses = [start]
+    for _ in range(steps):
+        poses.append(compose(poses[-1], np.array([v * DT, 0.0, omega * DT])))
+    return np.array(poses)
+
+
+def _feed(
+    backend: SlamBackend,
+    truths: dict[int, np.ndarray],
+    rng: np.random.Generator | None,
+    odom_sigma: float = 0.0,
+    point_sigma: float = 0.0,
+    update_every: int = 10,
+) -> None:
+    steps = len(next(iter(truths.values()))) - 1
+    for k in range(1, steps + 1):
+        for robot, truth in truths.items():
+            delta = between(truth[k - 1], truth[k])
+            if rng is not None:
+                delta = delta + rng.normal(scale=odom_sigma, size=3) * [1, 1, 1]
+            backend.add_odometry(OdometryIncrement(robot, k * DT, (k - 1) * DT, *delta))
+            pose = truth[k]
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            rel = LANDMARKS - [pose[0], pose[1], 0.0]
+            body = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+            body = np.column_stack([body, rel[:, 2]])
+            seen = body[np.linalg.norm(body[:, :2], axis=1) < SENSOR_RANGE_M]
+            if rng is not None:
+                seen = seen + rng.normal(scale=point_sigma, size=seen.shape)
+            if k % 2 == 0:
+                backend.add_landmarks(LandmarkObservations(robot, k * DT, seen))
+        if k % update_every == 0:
+            backend.update()
+    backend.update()
+
+
+def _team() -> dict[int, np.ndarray]:
+    return {
+        0: _circle_truth(np.array([0.0, 0.0, 0.0]), 0.3, 0.15, 300),
+        1: _circle_truth(np.array([3.0, -1.0, math.pi / 2]), 0.25, -0.1, 300),
+        2: _circle_truth(np.array([6.0, 1.0, math.pi]), 0.2, 0.0, 300),
+    }
+
+
+def test_noiseless_measurements_recover_the_truth_exactly() -> None:
+    truths = _team()
+    backend = SlamBackend(SlamConfig(), {r: t[0] for r, t in truths.items()})
+    _feed(backend, truths, rng=None)
+    for robot, truth in truths.items():
+        stamps, poses = backend.trajectory(robot)
+        rows = np.rint(stamps / DT).astype(int)
+        np.testing.assert_allclose(poses[:, :2], truth[rows, :2], atol=1e-6)
+        np.testing.assert_allclose(backend.latest_pose(robot), truth[-1], atol=1e-6)
+    lms = backend.landmarks()
+    # Every landmark estimate sits on a true landmark; none is duplicated.
+    nearest = np.linalg.norm(lms[:, None] - LANDMARKS[None], axis=2).min(axis=1)
+    assert nearest.max() < 1e-6
+    assert len(lms) == len({tuple(np.round(p, 3)) for p in lms})
+
+
+def test_noisy_optimum_is_consistent_with_its_covariance() -> None:
+    """Bound: each robot's final pose error must lie inside the estimator's own 99.9 % region.
+
+    With Gaussian noise the MAP error is ~N(0, P) with P the reported covariance (the
+    linearisation is mild at these noise levels), so e^T P^-1 e follows chi-square with
+    3 dof: 16.27 is its 99.9 % quantile. The config sigmas are set to the simulated ones.
+    """
+    odom_sigma, point_sigma = 0.003, 0.03
+    config = SlamConfig(
+        landmark_sigma_m=point_sigma,
+        odom_sigma_min_xy_m=odom_sigma * math.sqrt(3),
+        odom_sigma_min_theta_rad=odom_sigma * math.sqrt(3),
+        odom_sigma_xy_per_m=0.03,
+        odom_sigma_theta_per_rad=0.03,
+        odom_sigma_theta_per_m=0.03,
+    )
+    truths = _team()
+    backend = SlamBackend(config, {r: t[0] for r, t in truths.items()})
+    _feed(backend, truths, np.random.default_rng(7), odom_sigma, point_sigma)
+    for robot, truth in truths.items():
+        err = backend.latest_pose(robot) - truth[-1]
+        err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+        d2 = err @ np.linalg.solve(backend.latest_covariance(robot), err)
+        assert d2 < 16.27, (robot, err, d2)
+        assert np.hypot(*err[:2]) < 0.1
+    # Lattice landmarks seen at 3 cm noise from many poses: well below the noise.
+    lms = backend.landmarks()
+    nearest = np.linalg.norm(lms[:, None] - LANDMARKS[None], axis=2).min(axis=1)
+    assert np.sqrt(np.mean(nearest**2)) < point_sigma
+
+
+def test_shared_landmarks_correct_another_robots_drift() -> None:
+    """Robot 0 maps three landmarks from its known start; robot 1's odometry under-reads
+    distance by 10 %. When robot 1 sees robot 0's landmarks, its pose snaps back.
+
+    Config: odometry sigma 10 % of distance (the bias is then 1 sigma, so the Mahalanobis
+    gate accepts the association) and a 2 cm camera, so the landmarks (seen from a prior-
+    pinned pose) are ~10x more certain than robot 1's 3 m of odometry and the MAP pulls it
+    almost fully onto them: residual ~ 0.3 m * (1.2^2 / (1.2^2 + 9.5^2)) cm ~ 5 mm.
+    """
+    shared = np.array([[2.0, 0.0, 0.0], [2.0, 1.0, 0.0], [3.0, -0.5, 0.0]])
+    config = SlamConfig(odom_sigma_xy_per_m=0.1, landmark_sigma_m=0.02)
+    backend = SlamBackend(config, {0: np.zeros(3), 1: np.array([-2.0, -1.5, 0.0])})
+    backend.add_landmarks(LandmarkObservations(0, 0.0, shared))
+    backend.update()
+    truth1 = np.array([-2.0, -1.5, 0.0])
+    for k in range(1, 31):  # 3 m at 0.1 m per step
+        truth1 = compose(truth1, np.array([0.1, 0.0, 0.0]))
+        backend.add_odometry(OdometryIncrement(1, k * DT, (k - 1) * DT, 0.09, 0.0, 0.0))
+        if k % 5 == 0:
+            backend.update()
+    before = backend.latest_pose(1)
+    assert before[0] - truth1[0] == pytest.approx(-0.3, abs=1e-9)
+    body = shared - [truth1[0], truth1[1], 0.0]
+    results = backend.add_landmarks(LandmarkObservations(1, 3.05, body))
+    assert [r.landmark for r in results] == [0, 1, 2]
+    backend.update(extra_iterations=4)  # Huber reweighting needs a few Gauss-Newton steps
+    moved = backend.moved_keyframes()
+    after = backend.latest_pose(1)
+    assert np.hypot(*(after - truth1)[:2]) < 0.05
+    assert {r for r, _ in moved} == {1}
+    assert len(moved) >= backend.keyframe_count(1) // 2
+    np.testing.assert_allclose(backend.trajectory(0)[1][0], np.zeros(3), atol=0.02)
+
+
+def test_keyframes_grow_with_distance_not_time() -> None:
+    backend = SlamBackend(SlamConfig(keyframe_distance_m=0.3), {0: np.zeros(3)})
+    for k in range(1, 1001):  # 100 s standing still, observing
+        backend.add_odometry(OdometryIncrement(0, k * DT, (k - 1) * DT, 0.0, 0.0, 0.0))
+        backend.add_landmarks(LandmarkObservations(0, k * DT, np.array([[1.0, 0.0, 0.0]])))
+    backend.update()
+    assert backend.keyframe_count(0) == 1
+    for k in range(1001, 1031):  # then 3 m in 3 s
+        backend.add_odometry(OdometryIncrement(0, k * DT, (k - 1) * DT, 0.1, 0.0, 0.0))
+    backend.update()
+    assert backend.keyframe_count(0) == 11
+    assert len(backend.landmarks()) == 1
+
+
+def test_time_going_backwards_is_skipped_and_counted() -> None:
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    backend.add_odometry(OdometryIncrement(0, 1.0, 0.9, 0.1, 0.0, 0.0))
+    backend.add_odometry(OdometryIncrement(0, 0.5, 0.4, 0.1, 0.0, 0.0))
+    assert backend.skipped_messages["odometry"] == 1
+    np.testing.assert_allclose(backend.latest_pose(0), [0.1, 0.0, 0.0])
+    with pytest.raises(SlamError, match="robot 4"):
+        backend.add_odometry(OdometryIncrement(4, 1.0, 0.9, 0.1, 0.0, 0.0))
+
+
+def test_posed_scans_follow_their_keyframe() -> None:
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    scan = LidarScan(0, 0.0, np.zeros(4), np.ones(4), 8.0)
+    backend.add_odometry(OdometryIncrement(0, 0.1, 0.0, 0.1, 0.0, 0.0))
+    backend.add_scan(scan)
+    backend.update()
+    ((stored, pose),) = backend.posed_scans()
+    assert stored is scan
+    np.testing.assert_allclose(pose, [0.1, 0.0, 0.0], atol=1e-9)
+
+
+def test_gtsam_failures_become_slam_errors() -> None:
+    class Exploding:
+        def update(self, *args: object) -> None:
+            raise RuntimeError("Indeterminant linear system detected near variable x0")
+
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    backend._isam = Exploding()  # simulate GTSAM's C++ exception as pybind raises it
+    with pytest.raises(SlamError, match="Indeterminant"):
+        backend.update()

@@ -1,0 +1,144 @@
+"""Custom factor Jacobians against central differences through GTSAM's own retract."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from acslam.config import SlamConfig
+from acslam.geometry import compose
+from acslam.slam import keys
+from acslam.slam.association import pose_lever_jacobian
+from acslam.slam.factors import (
+    observation_factor,
+    observation_noise,
+    odometry_sigmas,
+    planar_compose_jacobians,
+    planar_to_pose3,
+    pose3_to_planar,
+)
+
+POSE = keys.pose_key(3, 7)
+LANDMARK = keys.landmark_key(11)
+
+
+def _random_pose(rng: np.random.Generator) -> gtsam.Pose3:
+    return gtsam.Pose3.Expmap(rng.normal(size=6))
+
+
+def _error(factor: gtsam.CustomFactor, pose: gtsam.Pose3, point: np.ndarray) -> np.ndarray:
+    values = gtsam.Values()
+    values.insert(POSE, pose)
+    values.insert(LANDMARK, gtsam.Point3(*point))
+    return np.asarray(factor.unwhitenedError(values))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_observation_jacobians_match_central_differences(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pose, point = _random_pose(rng), rng.normal(size=3) * 3
+    factor = observation_factor(POSE, LANDMARK, rng.normal(size=3), gtsam.noiseModel.Unit.Create(3))
+    values = gtsam.Values()
+    values.insert(POSE, pose)
+    values.insert(LANDMARK, gtsam.Point3(*point))
+    # With a unit noise model the linearised factor holds the raw Jacobians.
+    linear = factor.linearize(values)
+    h_pose, h_point = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
+    eps = 1e-6
+    num_pose = np.column_stack(
+        [
+            (
+                _error(factor, pose.retract(eps * e), point)
+                - _error(factor, pose.retract(-eps * e), point)
+            )
+            / (2 * eps)
+            for e in np.eye(6)
+        ]
+    )
+    num_point = np.column_stack(
+        [
+            (_error(factor, pose, point + eps * e) - _error(factor, pose, point - eps * e))
+            / (2 * eps)
+            for e in np.eye(3)
+        ]
+    )
+    np.testing.assert_allclose(h_pose, num_pose, atol=1e-6)
+    np.testing.assert_allclose(h_point, num_point, atol=1e-6)
+
+
+def test_observation_error_of_a_known_configuration() -> None:
+    # Robot at (1, 2) facing +y; landmark at (1, 5, 0.5) is 3 m straight ahead, 0.5 m up:
+    # R^T (l - t) = (3, 0, 0.5). Measured (2.9, 0.1, 0.5) -> e = (0.1, -0.1, 0).
+    factor = observation_factor(
+        POSE, LANDMARK, np.array([2.9, 0.1, 0.5]), gtsam.noiseModel.Unit.Create(3)
+    )
+    pose = planar_to_pose3(np.array([1.0, 2.0, np.pi / 2]))
+    np.testing.assert_allclose(
+        _error(factor, pose, np.array([1.0, 5.0, 0.5])), [0.1, -0.1, 0.0], atol=1e-12
+    )
+
+
+def test_observation_noise_scales_information_by_probability() -> None:
+    cov = np.diag([0.01, 0.04, 0.09])
+    noise = observation_noise(cov, 0.25, huber_k=100.0)
+    # Huber with a huge threshold is plain Gaussian: whitened error = sqrt(p) Sigma^-1/2 e.
+    e = np.array([0.1, 0.2, 0.3])
+    np.testing.assert_allclose(noise.whiten(e), 0.5 * e / np.sqrt(np.diag(cov)), atol=1e-12)
+    with pytest.raises(ValueError):
+        observation_noise(cov, 0.0, 1.0)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_pose_lever_jacobian_matches_retract(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pose, point = _random_pose(rng), rng.normal(size=3)
+    eps = 1e-6
+    numeric = np.column_stack(
+        [
+            (
+                np.asarray(pose.retract(eps * e).transformFrom(point))
+                - np.asarray(pose.retract(-eps * e).transformFrom(point))
+            )
+            / (2 * eps)
+            for e in np.eye(6)
+        ]
+    )
+    np.testing.assert_allclose(
+        pose_lever_jacobian(pose.rotation().matrix(), point), numeric, atol=1e-6
+    )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_planar_compose_jacobians(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=3), rng.normal(size=3)
+    ja, jb = planar_compose_jacobians(a, b)
+    eps = 1e-6
+    for jac, which in ((ja, 0), (jb, 1)):
+        cols = []
+        for e in np.eye(3):
+            plus = compose(a + eps * e, b) if which == 0 else compose(a, b + eps * e)
+            minus = compose(a - eps * e, b) if which == 0 else compose(a, b - eps * e)
+            cols.append((plus - minus) / (2 * eps))
+        np.testing.assert_allclose(jac, np.column_stack(cols), atol=1e-6)
+
+
+def test_planar_round_trip_and_odometry_sigmas() -> None:
+    pose = np.array([1.5, -2.0, 2.5])
+    np.testing.assert_allclose(pose3_to_planar(planar_to_pose3(pose)), pose, atol=1e-12)
+    config = SlamConfig()
+    floor = odometry_sigmas(config, 0.0, 0.0)
+    assert floor[0] == config.odom_sigma_min_xy_m
+    far = odometry_sigmas(config, 10.0, 0.0)
+    assert far[0] == pytest.approx(config.odom_sigma_xy_per_m * 10.0)
+
+
+def test_key_scheme_round_trips_beyond_26_robots() -> None:
+    for robot, index in ((0, 0), (30, 12345), (keys.MAX_ROBOTS - 1, keys.MAX_INDEX - 1)):
+        assert keys.decode_pose_key(keys.pose_key(robot, index)) == (robot, index)
+    assert keys.decode_landmark_key(keys.landmark_key(42)) == 42
+    assert keys.is_pose_key(keys.pose_key(1, 2)) and not keys.is_pose_key(keys.landmark_key(2))
+    assert keys.describe(keys.pose_key(30, 4)) == "robot 30 keyframe 4"
+    with pytest.raises(ValueError):
+        keys.pose_key(keys.MAX_ROBOTS, 0)
