@@ -19,6 +19,7 @@ from acslam.planning.astar import (
     lookahead_point,
     path_length_m,
     plan_path,
+    remaining_length_m,
     shortcut_cells,
 )
 
@@ -170,3 +171,10 @@ def test_lookahead_on_an_l_shaped_path() -> None:
     np.testing.assert_allclose(lookahead_point(path, robot, 2.0), [2.0, 0.5])
     np.testing.assert_allclose(lookahead_point(path, robot, 9.0), [2.0, 2.0])
     np.testing.assert_allclose(lookahead_point(path, np.array([2.4, 1.0]), 0.5), [2.0, 1.5])
+
+
+def test_remaining_length_goes_along_the_path_from_the_projection() -> None:
+    path = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    assert remaining_length_m(path, np.array([0.5, 0.3])) == pytest.approx(0.3 + 1.5 + 2.0)
+    assert remaining_length_m(path, np.array([2.0, 2.0])) == pytest.approx(0.0)
+    assert remaining_length_m(path[:1], np.array([3.0, 4.0])) == pytest.approx(5.0)

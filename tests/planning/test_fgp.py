@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import gtsam
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -11,7 +12,7 @@ from scipy import ndimage
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
 from acslam.planning.astar import lookahead_point, plan_path
-from acslam.planning.fgp import FactorGraphPlanner, obstacle_error, robot_error
+from acslam.planning.fgp import FactorGraphPlanner, FgpProblem, obstacle_errors, robot_errors
 from acslam.planning.field import DistanceField, RobotState
 from acslam.sim.kinematics import limit_command, step_pose
 
@@ -28,10 +29,11 @@ def disc_world(center_xy_m: tuple[float, float], radius_m: float) -> tuple[GridS
 
 
 def numeric_jacobian(fn, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """Central differences of ``fn`` (M, 2) -> (M,), row by row: (M, 2)."""
     cols = []
-    for k in range(len(x)):
+    for k in range(x.shape[1]):
         dx = np.zeros_like(x)
-        dx[k] = h
+        dx[:, k] = h
         cols.append((fn(x + dx) - fn(x - dx)) / (2 * h))
     return np.stack(cols, axis=1)
 
@@ -42,35 +44,70 @@ def test_obstacle_jacobian_matches_central_differences(seed: int) -> None:
     grid = GridSpec(0.0, 0.0, 0.05, 40, 40)
     occupied = ndimage.binary_dilation(rng.random(grid.shape) < 0.01, iterations=2)
     field = DistanceField(ndimage.distance_transform_edt(~occupied) * 0.05, grid)
-    checked = 0
-    for _ in range(40):
-        state = np.concatenate([rng.uniform(0.1, 1.9, 2), rng.normal(size=2)])
-        error, jacobian = obstacle_error(state, field, PLANNING.obstacle_influence_m)
-        if error[0] == 0.0:
-            continue
-        numeric = numeric_jacobian(
-            lambda x: obstacle_error(x, field, PLANNING.obstacle_influence_m)[0], state
-        )
-        np.testing.assert_allclose(jacobian, numeric, atol=1e-6)
-        checked += 1
-    assert checked >= 5
+    influence = PLANNING.obstacle_influence_m
+    xy = rng.uniform(0.1, 1.9, (200, 2))
+    error, jacobian = obstacle_errors(xy, field, influence)
+    np.testing.assert_allclose(error, np.maximum(0.0, 1.0 - field.value(xy) / influence))
+    numeric = numeric_jacobian(lambda p: obstacle_errors(p, field, influence)[0], xy)
+    active = error > 0.0
+    assert active.sum() >= 5
+    np.testing.assert_allclose(jacobian, numeric, atol=1e-6)
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_robot_jacobian_matches_central_differences(seed: int) -> None:
     rng = np.random.default_rng(seed)
     influence = PLANNING.robot_influence_m
-    for _ in range(20):
-        a = np.concatenate([rng.uniform(-0.3, 0.3, 2), rng.normal(size=2)])
-        b = np.concatenate([rng.uniform(-0.3, 0.3, 2), rng.normal(size=2)])
-        error, jac_a, jac_b = robot_error(a, b, influence)
-        assert error[0] == pytest.approx(max(0.0, 1 - np.linalg.norm(a[:2] - b[:2]) / influence))
-        np.testing.assert_allclose(
-            jac_a, numeric_jacobian(lambda x, b=b: robot_error(x, b, influence)[0], a), atol=1e-6
-        )
-        np.testing.assert_allclose(
-            jac_b, numeric_jacobian(lambda x, a=a: robot_error(a, x, influence)[0], b), atol=1e-6
-        )
+    a, b = rng.uniform(-0.3, 0.3, (2, 50, 2))
+    error, jac_a = robot_errors(a, b, influence)
+    np.testing.assert_allclose(
+        error, np.maximum(0.0, 1 - np.linalg.norm(a - b, axis=1) / influence)
+    )
+    assert (error > 0.0).sum() >= 25
+    np.testing.assert_allclose(
+        jac_a, numeric_jacobian(lambda x: robot_errors(x, b, influence)[0], a), atol=1e-6
+    )
+    np.testing.assert_allclose(
+        -jac_a, numeric_jacobian(lambda x: robot_errors(a, x, influence)[0], b), atol=1e-6
+    )
+
+
+def test_linearised_graph_matches_the_cost_to_first_order() -> None:
+    """The JacobianFactors handed to GTSAM carry the right keys, signs and whitening:
+    their error at delta = 0 is the cost, their gradient its numeric gradient."""
+    rng = np.random.default_rng(3)
+    grid, distance = disc_world((0.0, 0.0), 0.3)
+    planner = FactorGraphPlanner(PLANNING, ROBOTS)
+    count, n = 3, PLANNING.horizon_steps
+    # Three robots passing close to the disc and to each other.
+    x = np.zeros((count, n + 1, 4))
+    for r, y0 in enumerate((-0.35, -0.05, 0.3)):
+        x[r, :, 0] = np.linspace(-0.5, 0.5, n + 1)
+        x[r, :, 1] = y0
+    x += rng.normal(scale=0.03, size=x.shape)
+    problem = FgpProblem(
+        x[:, 0] + rng.normal(scale=0.01, size=(count, 4)),
+        rng.uniform(-1.0, 1.0, (count, 2)),
+        DistanceField(distance, grid),
+    )
+    cost = planner.cost(problem, x)
+    graph = planner.linearize(problem, x)
+    keys = gtsam.KeyVector(range(x.size // 4))
+    zero = gtsam.VectorValues()
+    for key in keys:
+        zero.insert(key, np.zeros(4))
+    assert graph.error(zero) == pytest.approx(cost, rel=1e-9)
+    assert planner.residuals(problem, x)[3].any() and planner.residuals(problem, x)[4].any()
+    h = 1e-6
+    numeric = np.zeros(x.size)
+    for k in range(x.size):
+        dx = np.zeros(x.size)
+        dx[k] = h
+        numeric[k] = (
+            planner.cost(problem, x + dx.reshape(x.shape))
+            - planner.cost(problem, x - dx.reshape(x.shape))
+        ) / (2 * h)
+    np.testing.assert_allclose(graph.gradientAtZero().vector(keys), numeric, rtol=1e-5, atol=1e-4)
 
 
 def drive(

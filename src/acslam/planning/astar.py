@@ -366,6 +366,21 @@ def path_length_m(points_m: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points_m, axis=0), axis=1).sum())
 
 
+def _projection(points_m: np.ndarray, robot_xy_m: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Where the robot projects onto a polyline of >= 2 points: (arc length there (m),
+    distance to it (m), cumulative arc length at each point)."""
+    a, b = points_m[:-1], points_m[1:]
+    ab = b - a
+    seg_len = np.linalg.norm(ab, axis=1)
+    safe = np.where(seg_len > 0, seg_len**2, 1.0)
+    t = np.clip(((np.asarray(robot_xy_m) - a) * ab).sum(axis=1) / safe, 0.0, 1.0)
+    proj = a + t[:, None] * ab
+    gaps = np.linalg.norm(proj - robot_xy_m, axis=1)
+    k = int(np.argmin(gaps))
+    arc = np.concatenate(([0.0], np.cumsum(seg_len)))
+    return float(arc[k] + t[k] * seg_len[k]), float(gaps[k]), arc
+
+
 def lookahead_point(points_m: np.ndarray, robot_xy_m: np.ndarray, distance_m: float) -> np.ndarray:
     """Point ``distance_m`` further along the path than the path point nearest the robot.
 
@@ -375,15 +390,21 @@ def lookahead_point(points_m: np.ndarray, robot_xy_m: np.ndarray, distance_m: fl
     points_m = np.asarray(points_m, dtype=float)
     if len(points_m) == 1:
         return points_m[0].copy()
-    a, b = points_m[:-1], points_m[1:]
-    ab = b - a
-    seg_len = np.linalg.norm(ab, axis=1)
-    safe = np.where(seg_len > 0, seg_len**2, 1.0)
-    t = np.clip(((np.asarray(robot_xy_m) - a) * ab).sum(axis=1) / safe, 0.0, 1.0)
-    proj = a + t[:, None] * ab
-    k = int(np.argmin(np.linalg.norm(proj - robot_xy_m, axis=1)))
-    arc = np.concatenate(([0.0], np.cumsum(seg_len)))
-    target = arc[k] + t[k] * seg_len[k] + distance_m
+    here_m, _, arc = _projection(points_m, robot_xy_m)
+    target = here_m + distance_m
     return np.array(
         [np.interp(target, arc, points_m[:, 0]), np.interp(target, arc, points_m[:, 1])]
     )
+
+
+def remaining_length_m(points_m: np.ndarray, robot_xy_m: np.ndarray) -> float:
+    """Distance to go along the path: to the robot's projection onto it, then along it.
+
+    The progress measure for stuck detection: going around an obstacle raises the
+    straight-line distance to the goal but still shortens this one.
+    """
+    points_m = np.asarray(points_m, dtype=float)
+    if len(points_m) == 1:
+        return float(np.linalg.norm(points_m[0] - robot_xy_m))
+    here_m, off_m, arc = _projection(points_m, robot_xy_m)
+    return off_m + float(arc[-1]) - here_m

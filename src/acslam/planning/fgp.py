@@ -5,20 +5,32 @@ One GTSAM graph per control cycle holds every robot's states ``[x, y, vx, vy]`` 
 
 * start prior (4.59): tight on the measured position, ``fgp_start_sigma_mps`` on the
   current velocity (the velocity may change by about one acceleration step);
-* constant-velocity dynamics (4.60-4.62): linear, so a C++ ``JacobianFactor`` wrapped in
-  a ``LinearContainerFactor`` linearised at zero (no Python callback);
+* constant-velocity dynamics (4.60-4.62), linear;
 * goal prior (4.68) on the last position at the lookahead point, ``fgp_goal_sigma_m``;
   the last velocity is left almost free (sigma 10 m/s);
 * obstacle factors (4.63-4.64), ``e = max(0, 1 - d / d_max^obs)`` with ``d`` the
   bilinearly interpolated distance field, and inter-robot factors (4.65-4.66),
-  ``e = max(0, 1 - |p_r - p_s| / d_max^robot)``, both ``gtsam.CustomFactor``. They are
-  added for steps ``1..N`` (step 0 is fixed by the start prior) whose initial guess lies
-  within twice the influence range; beyond ``d_max`` their error and Jacobian are zero.
+  ``e = max(0, 1 - |p_r - p_s| / d_max^robot)`` between robots at the same step, for
+  steps ``1..N`` (step 0 is fixed by the start prior).
 
-Solved with Levenberg-Marquardt, warm-started from the previous cycle's solution shifted
-by one step and translated onto the measured position. A symmetric head-on meeting is a
-saddle of eq. 4.69 where both robots would just stop, so when building the initial guess
-a robot that has another one dead ahead is nudged ``fgp_keep_right_m`` to its right.
+Speed: GTSAM's ``CustomFactor`` calls back into Python once per factor and iteration,
+which cost 77 ms per cycle for 8 robots. Instead we run Levenberg-Marquardt ourselves
+(GTSAM's schedule: lambda x10 on a rejected step, /10 on an accepted one, but from 1e-3;
+stop when an accepted step lowers the cost by less than 1e-3 of it, or after
+``fgp_max_iterations`` linear solves; against 1e-5 for both, measured on
+``benchmarks/planning_speed.py``, this halves the solves for 3 robots and changes no
+closed-loop test outcome). Each iteration evaluates every residual and Jacobian at once
+in NumPy (:func:`obstacle_errors`, :func:`robot_errors`) and hands GTSAM one
+``GaussianFactorGraph`` of whitened ``JacobianFactor`` s, eliminated in C++ in a fixed
+step-major ordering. The hinge factors enter the linear graph only where their error is
+positive at the current linearisation point, the tightest possible gating: beyond
+``d_max`` their error and Jacobian are zero, and a step that runs into a new one raises
+the cost and is rejected.
+
+Warm-started from the previous cycle's solution shifted by one step and translated onto
+the measured position. A symmetric head-on meeting is a saddle of eq. 4.69 where both
+robots would just stop, so when building the initial guess a robot that has another one
+dead ahead is nudged ``fgp_keep_right_m`` to its right.
 
 Commands (4.70-4.71): ``v = |p_1 - p_0| / dt``; the heading to reach is the direction of
 ``p_1 - p_0`` (toward the goal when that displacement is negligible, unchanged within one
@@ -42,45 +54,63 @@ from acslam.config import PlanningConfig, RobotsConfig
 from acslam.planning.field import DistanceField, RobotState
 
 _FREE_VELOCITY_SIGMA_MPS = 10.0
+_LAMBDA_INITIAL = 1e-3
+_LAMBDA_FACTOR = 10.0
+_LAMBDA_MAX = 1e5
+_LAMBDA_MIN = 1e-10
+_RELATIVE_TOLERANCE = 1e-3
+_ABSOLUTE_TOLERANCE = 1e-5
 
 
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def obstacle_error(
-    state: np.ndarray, field: DistanceField, influence_m: float
+def obstacle_errors(
+    xy_m: np.ndarray, field: DistanceField, influence_m: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 4.63 for one state: error (1,) and its Jacobian (1, 4)."""
-    distance, gradient = field.value_and_gradient(state[:2])
-    jacobian = np.zeros((1, 4))
-    if distance >= influence_m:
-        return np.zeros(1), jacobian
-    jacobian[0, :2] = -gradient / influence_m
-    return np.array([1.0 - distance / influence_m]), jacobian
+    """Eq. 4.63 at (M, 2) positions: errors (M,) and their Jacobians (M, 2) w.r.t. ``xy``."""
+    distance, gradient = field.value_and_gradient(xy_m)
+    inside = distance < influence_m
+    error = np.where(inside, 1.0 - distance / influence_m, 0.0)
+    return error, np.where(inside[:, None], -gradient / influence_m, 0.0)
 
 
-def robot_error(
-    state_r: np.ndarray, state_s: np.ndarray, influence_m: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Eq. 4.65 for two states at one step: error (1,), Jacobians (1, 4) for r and s."""
-    delta = state_r[:2] - state_s[:2]
-    distance = float(np.hypot(delta[0], delta[1]))
-    jac_r = np.zeros((1, 4))
-    if distance >= influence_m:
-        return np.zeros(1), jac_r, jac_r.copy()
-    unit = delta / distance if distance > 1e-9 else np.array([1.0, 0.0])
-    jac_r[0, :2] = -unit / influence_m
-    return np.array([1.0 - distance / influence_m]), jac_r, -jac_r
+def robot_errors(
+    xy_r_m: np.ndarray, xy_s_m: np.ndarray, influence_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 4.65 for (M, 2) position pairs: errors (M,) and Jacobians (M, 2) w.r.t. ``xy_r``.
+
+    The Jacobian w.r.t. ``xy_s`` is the negative. Coincident robots are pushed apart
+    along +x rather than getting an undefined direction.
+    """
+    delta = np.asarray(xy_r_m, dtype=float) - np.asarray(xy_s_m, dtype=float)
+    distance = np.hypot(delta[:, 0], delta[:, 1])
+    inside = distance < influence_m
+    apart = distance > 1e-9
+    unit = np.where(apart[:, None], delta / np.where(apart, distance, 1.0)[:, None], [1.0, 0.0])
+    error = np.where(inside, 1.0 - distance / influence_m, 0.0)
+    return error, np.where(inside[:, None], -unit / influence_m, 0.0)
 
 
 @dataclass(frozen=True)
 class FgpResult:
-    """Commands ``(v, omega)`` per robot, the optimised trajectories (R, N+1, 4), cost."""
+    """Commands ``(v, omega)`` per robot, the optimised trajectories (R, N+1, 4), the
+    final cost (half the sum of squared whitened errors) and the linear solves used."""
 
     commands: list[tuple[float, float]]
     trajectories: np.ndarray
     final_error: float
+    iterations: int
+
+
+@dataclass(frozen=True)
+class FgpProblem:
+    """What one cycle optimises: start states (R, 4), goal positions (R, 2), the field."""
+
+    starts: np.ndarray
+    goals_xy_m: np.ndarray
+    field: DistanceField
 
 
 class FactorGraphPlanner:
@@ -93,20 +123,21 @@ class FactorGraphPlanner:
         self.dt_s = planning.horizon_s / planning.horizon_steps
         self._previous: dict[int, np.ndarray] = {}
         p = planning
-        self._start_noise = gtsam.noiseModel.Diagonal.Sigmas(
-            np.array([p.fgp_start_sigma_m] * 2 + [p.fgp_start_sigma_mps] * 2)
+        # Whitening: residuals and Jacobians are divided by their sigmas in NumPy, so
+        # every JacobianFactor carries a unit noise model.
+        self._start_sigma = np.array([p.fgp_start_sigma_m] * 2 + [p.fgp_start_sigma_mps] * 2)
+        self._dynamics_sigma = np.array(
+            [p.fgp_dynamics_sigma_m] * 2 + [p.fgp_dynamics_sigma_mps] * 2
         )
-        self._dynamics_noise = gtsam.noiseModel.Diagonal.Sigmas(
-            np.array([p.fgp_dynamics_sigma_m] * 2 + [p.fgp_dynamics_sigma_mps] * 2)
-        )
-        self._goal_noise = gtsam.noiseModel.Diagonal.Sigmas(
-            np.array([p.fgp_goal_sigma_m] * 2 + [_FREE_VELOCITY_SIGMA_MPS] * 2)
-        )
-        self._obstacle_noise = gtsam.noiseModel.Isotropic.Sigma(1, p.fgp_obstacle_sigma)
-        self._robot_noise = gtsam.noiseModel.Isotropic.Sigma(1, p.fgp_robot_sigma)
-        a_prev = -np.eye(4)
-        a_prev[0, 2] = a_prev[1, 3] = -self.dt_s
-        self._dynamics_jacobians = (a_prev, np.eye(4))
+        self._goal_sigma = np.array([p.fgp_goal_sigma_m] * 2 + [_FREE_VELOCITY_SIGMA_MPS] * 2)
+        # x_{i+1} = F x_i: position advances by velocity * dt, velocity is constant.
+        self._transition = np.eye(4)
+        self._transition[0, 2] = self._transition[1, 3] = self.dt_s
+        self._jac_prev = -self._transition / self._dynamics_sigma[:, None]
+        self._jac_next = np.diag(1.0 / self._dynamics_sigma)
+        self._jac_start = np.diag(1.0 / self._start_sigma)
+        self._jac_goal = np.diag(1.0 / self._goal_sigma)
+        self._unit = {k: gtsam.noiseModel.Unit.Create(k) for k in (1, 4)}
 
     def reset(self, robot_id: int | None = None) -> None:
         """Forget the warm start of one robot (e.g. after a new assignment) or of all."""
@@ -140,24 +171,24 @@ class FactorGraphPlanner:
 
     def _keep_right(self, guesses: np.ndarray, goals: np.ndarray) -> None:
         """Nudge states that have another robot dead ahead to the right (in place)."""
-        nudge = self.planning.fgp_keep_right_m
-        radius = self.robots.radius_m
-        original = guesses.copy()
-        for r in range(len(guesses)):
-            for i in range(1, self.steps + 1):
-                forward = goals[r] - original[r, 0, :2]
-                norm = float(np.linalg.norm(forward))
-                if norm < 1e-6:
-                    continue
-                forward /= norm
-                for s in range(len(guesses)):
-                    rel = original[s, i, :2] - original[r, i, :2]
-                    ahead = float(rel @ forward)
-                    lateral = float(forward[0] * rel[1] - forward[1] * rel[0])
-                    close = float(np.linalg.norm(rel)) < 2.0 * self.planning.robot_influence_m
-                    if s != r and close and ahead > 0.0 and abs(lateral) < 2.0 * radius:
-                        guesses[r, i, :2] += nudge * np.array([forward[1], -forward[0]])
-                        break
+        count = len(guesses)
+        if count < 2:
+            return
+        forward = goals - guesses[:, 0, :2]
+        norm = np.linalg.norm(forward, axis=1)
+        moving = norm >= 1e-6
+        forward = forward / np.where(moving, norm, 1.0)[:, None]
+        # rel[r, s, i]: where robot s is at step i, seen from robot r.
+        rel = guesses[None, :, 1:, :2] - guesses[:, None, 1:, :2]
+        ahead = np.einsum("rsik,rk->rsi", rel, forward)
+        lateral = forward[:, None, None, 0] * rel[..., 1] - forward[:, None, None, 1] * rel[..., 0]
+        close = np.linalg.norm(rel, axis=-1) < 2.0 * self.planning.robot_influence_m
+        other = ~np.eye(count, dtype=bool)[:, :, None]
+        blocked = (
+            other & close & (ahead > 0.0) & (np.abs(lateral) < 2.0 * self.robots.radius_m)
+        ).any(axis=1) & moving[:, None]
+        right = np.stack([forward[:, 1], -forward[:, 0]], axis=1)
+        guesses[:, 1:, :2] += self.planning.fgp_keep_right_m * blocked[..., None] * right[:, None]
 
     def plan(
         self,
@@ -177,89 +208,142 @@ class FactorGraphPlanner:
             [self._initial_guess(k, s, g) for k, s, g in zip(ids, states, goals, strict=True)]
         )
         self._keep_right(guesses, goals)
-        graph, values = self._build(states, goals, guesses, field)
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(self.planning.fgp_max_iterations)
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
-        trajectories = np.array(
-            [
-                [result.atVector(self._key(r, i)) for i in range(self.steps + 1)]
-                for r in range(len(states))
-            ]
-        )
+        starts = guesses[:, 0].copy()
+        starts[:, :2] = [s.xy_m for s in states]
+        problem = FgpProblem(starts, goals, field)
+        trajectories, cost, iterations = self.optimize(problem, guesses)
         for k, trajectory in zip(ids, trajectories, strict=True):
             self._previous[k] = trajectory
         commands = [
             self._command(s, t, g) for s, t, g in zip(states, trajectories, goals, strict=True)
         ]
-        return FgpResult(commands, trajectories, graph.error(result))
+        return FgpResult(commands, trajectories, cost, iterations)
 
-    def _build(
-        self,
-        states: Sequence[RobotState],
-        goals: np.ndarray,
-        guesses: np.ndarray,
-        field: DistanceField,
-    ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    def residuals(self, problem: FgpProblem, x: np.ndarray) -> list[np.ndarray]:
+        """Whitened residuals of every factor at states ``x`` (R, N+1, 4), by kind."""
         p = self.planning
-        graph = gtsam.NonlinearFactorGraph()
-        values = gtsam.Values()
-        zero = gtsam.Values()
-        a_prev, a_next = self._dynamics_jacobians
-        for r, state in enumerate(states):
-            start = guesses[r, 0].copy()
-            start[:2] = state.xy_m
-            graph.add(gtsam.PriorFactorVector(self._key(r, 0), start, self._start_noise))
-            goal = np.concatenate([goals[r], np.zeros(2)])
-            graph.add(gtsam.PriorFactorVector(self._key(r, self.steps), goal, self._goal_noise))
-            for i in range(self.steps + 1):
-                values.insert(self._key(r, i), guesses[r, i])
-                zero.insert(self._key(r, i), np.zeros(4))
-            for i in range(self.steps):
-                linear = gtsam.JacobianFactor(
-                    self._key(r, i),
-                    a_prev,
-                    self._key(r, i + 1),
-                    a_next,
-                    np.zeros(4),
-                    self._dynamics_noise,
+        positions = x[:, 1:, :2]
+        first, second = np.triu_indices(len(x), 1)
+        obstacle, _ = obstacle_errors(
+            positions.reshape(-1, 2), problem.field, p.obstacle_influence_m
+        )
+        robot, _ = robot_errors(
+            positions[first].reshape(-1, 2),
+            positions[second].reshape(-1, 2),
+            p.robot_influence_m,
+        )
+        goal = np.concatenate([problem.goals_xy_m, np.zeros_like(problem.goals_xy_m)], axis=1)
+        return [
+            (x[:, 0] - problem.starts) / self._start_sigma,
+            (x[:, 1:] - x[:, :-1] @ self._transition.T) / self._dynamics_sigma,
+            (x[:, -1] - goal) / self._goal_sigma,
+            obstacle / p.fgp_obstacle_sigma,
+            robot / p.fgp_robot_sigma,
+        ]
+
+    def cost(self, problem: FgpProblem, x: np.ndarray) -> float:
+        """Eq. 4.69: half the sum of squared whitened errors at states ``x``."""
+        return 0.5 * sum(float(np.sum(r * r)) for r in self.residuals(problem, x))
+
+    def linearize(self, problem: FgpProblem, x: np.ndarray) -> gtsam.GaussianFactorGraph:
+        """The whole team's problem linearised at ``x``, in the update ``delta`` per key.
+
+        Every factor becomes ``J delta = -e`` (whitened), one ``JacobianFactor`` each.
+        """
+        p = self.planning
+        count, n = len(x), self.steps
+        start_e, dynamics_e, goal_e, _, _ = self.residuals(problem, x)
+        graph = gtsam.GaussianFactorGraph()
+        unit1, unit4 = self._unit[1], self._unit[4]
+        for r in range(count):
+            graph.add(gtsam.JacobianFactor(self._key(r, 0), self._jac_start, -start_e[r], unit4))
+            for i in range(n):
+                graph.add(
+                    gtsam.JacobianFactor(
+                        self._key(r, i),
+                        self._jac_prev,
+                        self._key(r, i + 1),
+                        self._jac_next,
+                        -dynamics_e[r, i],
+                        unit4,
+                    )
                 )
-                graph.add(gtsam.LinearContainerFactor(linear, zero))
-            clearance = field.value(guesses[r, 1:, :2])
-            for i in np.flatnonzero(clearance < 2.0 * p.obstacle_influence_m) + 1:
-                graph.add(self._obstacle_factor(self._key(r, int(i)), field))
-        for r in range(len(states)):
-            for s in range(r + 1, len(states)):
-                gaps = np.linalg.norm(guesses[r, 1:, :2] - guesses[s, 1:, :2], axis=1)
-                for i in np.flatnonzero(gaps < 2.0 * p.robot_influence_m) + 1:
-                    graph.add(self._robot_factor(self._key(r, int(i)), self._key(s, int(i))))
-        return graph, values
-
-    def _obstacle_factor(self, key: int, field: DistanceField) -> gtsam.CustomFactor:
-        influence_m = self.planning.obstacle_influence_m
-
-        def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians: list | None):
-            e, jacobian = obstacle_error(values.atVector(this.keys()[0]), field, influence_m)
-            if jacobians is not None:
-                jacobians[0] = jacobian
-            return e
-
-        return gtsam.CustomFactor(self._obstacle_noise, [key], error)
-
-    def _robot_factor(self, key_r: int, key_s: int) -> gtsam.CustomFactor:
-        influence_m = self.planning.robot_influence_m
-
-        def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians: list | None):
-            keys = this.keys()
-            e, jac_r, jac_s = robot_error(
-                values.atVector(keys[0]), values.atVector(keys[1]), influence_m
+            graph.add(gtsam.JacobianFactor(self._key(r, n), self._jac_goal, -goal_e[r], unit4))
+        positions = x[:, 1:, :2]
+        error, jac = obstacle_errors(
+            positions.reshape(-1, 2), problem.field, p.obstacle_influence_m
+        )
+        jac4 = np.zeros((len(error), 1, 4))
+        jac4[:, 0, :2] = jac / p.fgp_obstacle_sigma
+        for flat in np.flatnonzero(error > 0.0):
+            r, i = divmod(int(flat), n)
+            b = np.array([-error[flat] / p.fgp_obstacle_sigma])
+            graph.add(gtsam.JacobianFactor(self._key(r, i + 1), jac4[flat], b, unit1))
+        first, second = np.triu_indices(count, 1)
+        error, jac = robot_errors(
+            positions[first].reshape(-1, 2), positions[second].reshape(-1, 2), p.robot_influence_m
+        )
+        jac4 = np.zeros((len(error), 1, 4))
+        jac4[:, 0, :2] = jac / p.fgp_robot_sigma
+        for flat in np.flatnonzero(error > 0.0):
+            pair, i = divmod(int(flat), n)
+            b = np.array([-error[flat] / p.fgp_robot_sigma])
+            graph.add(
+                gtsam.JacobianFactor(
+                    self._key(int(first[pair]), i + 1),
+                    jac4[flat],
+                    self._key(int(second[pair]), i + 1),
+                    -jac4[flat],
+                    b,
+                    unit1,
+                )
             )
-            if jacobians is not None:
-                jacobians[0] = jac_r
-                jacobians[1] = jac_s
-            return e
+        return graph
 
-        return gtsam.CustomFactor(self._robot_noise, [key_r, key_s], error)
+    def optimize(self, problem: FgpProblem, x0: np.ndarray) -> tuple[np.ndarray, float, int]:
+        """Levenberg-Marquardt from ``x0``: (states, final cost, linear solves used).
+
+        Eliminated step by step (all robots at step 0, then step 1, ...): the dynamics
+        chain each robot and the inter-robot factors only couple states of one step, so
+        the fill-in stays within two steps, and no COLAMD ordering is computed per solve.
+        """
+        x = x0.copy()
+        count = len(x)
+        cost = self.cost(problem, x)
+        keys = gtsam.KeyVector(range(x.size // 4))
+        ordering = gtsam.Ordering()
+        for i in range(self.steps + 1):
+            for r in range(count):
+                ordering.push_back(self._key(r, i))
+        zero4, unit4 = np.zeros(4), self._unit[4]
+        damping = _LAMBDA_INITIAL
+        solves = 0
+        new_cost = cost
+        while solves < self.planning.fgp_max_iterations and cost > _ABSOLUTE_TOLERANCE:
+            linear = self.linearize(problem, x)
+            accepted = False
+            while solves < self.planning.fgp_max_iterations:
+                graph = linear.clone()
+                block = math.sqrt(damping) * np.eye(4)
+                for key in keys:
+                    graph.add(gtsam.JacobianFactor(key, block, zero4, unit4))
+                candidate = x + graph.optimize(ordering).vector(keys).reshape(x.shape)
+                solves += 1
+                new_cost = self.cost(problem, candidate)
+                if new_cost < cost:
+                    accepted = True
+                    break
+                damping *= _LAMBDA_FACTOR
+                if damping > _LAMBDA_MAX:
+                    break
+            if not accepted:
+                break
+            converged = cost - new_cost < _RELATIVE_TOLERANCE * cost
+            x, cost = candidate, new_cost
+            damping = max(damping / _LAMBDA_FACTOR, _LAMBDA_MIN)
+            if converged:
+                break
+        return x, cost, solves
 
     def _command(
         self, state: RobotState, trajectory: np.ndarray, goal: np.ndarray

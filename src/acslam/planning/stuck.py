@@ -1,8 +1,8 @@
 """Stuck detection: no progress toward the goal for ``stuck_timeout_s``.
 
 Both local planners can stall in a local minimum (thesis §4.8 notes it for DWA); the
-detector only reports it, and the caller recovers (rotate in place, back off, replan or
-ask for a new assignment).
+detector only reports it. :mod:`~acslam.planning.recovery` acts on it (back off, replan
+around the trap); asking for a new assignment is the caller's choice.
 """
 
 from __future__ import annotations
