@@ -405,6 +405,23 @@ class PlanningConfig(Section):
     recovery_penalty_cost: NonNegativeFloat = 10.0
 
 
+class ServerConfig(Section):
+    """How the centralized server schedules its pipeline (thesis Fig. 4.2)."""
+
+    # Costmap and frontiers are refreshed at this period; SLAM, map and local planning
+    # run every control period. 0.5 s lets a robot at 0.22 m/s move ~2 cells in between.
+    map_update_period_s: PositiveFloat = 0.5
+    # A robot within this path length of its frontier target has reached it.
+    goal_tolerance_m: PositiveFloat = 0.3
+    # Beams ending within robot radius + this margin of another robot are dropped before
+    # mapping: robots are not walls.
+    robot_filter_margin_m: NonNegativeFloat = 0.15
+    # Costmap and planning use the known area's bounding box grown by this margin.
+    window_margin_m: PositiveFloat = 1.0
+    # Exploration is over when no robot has had a reachable frontier for this long.
+    finish_after_idle_s: NonNegativeFloat = 4.0
+
+
 class AlgorithmsConfig(Section):
     slam: SlamConfig = SlamConfig()
     mapping: MappingConfig = MappingConfig()
@@ -412,6 +429,7 @@ class AlgorithmsConfig(Section):
     exploration: ExplorationConfig = ExplorationConfig()
     allocation: AllocationConfig = AllocationConfig()
     planning: PlanningConfig = PlanningConfig()
+    server: ServerConfig = ServerConfig()
 
 
 # --------------------------------------------------------------------------- scenario

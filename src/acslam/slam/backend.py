@@ -108,6 +108,7 @@ class SlamBackend:
         self._odometry_variances: dict[int, np.ndarray] = {}
         self._known_landmarks: dict[int, int] = {}
         self._scans: list[tuple[LidarScan, int, np.ndarray]] = []
+        self._scans_by_keyframe: dict[int, list[int]] = {}
         self._moved: list[tuple[int, int]] = []
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
         self.update_durations_s: list[float] = []
@@ -261,11 +262,19 @@ class SlamBackend:
         self._pending_landmark_covs[index] = covariance
         return index
 
-    def add_scan(self, msg: LidarScan) -> None:
-        """Store a scan with its robot's latest keyframe and the odometry offset since it."""
+    def add_scan(self, msg: LidarScan) -> int | None:
+        """Store a scan with its robot's latest keyframe and the odometry offset since it.
+
+        Returns the scan's index (for :meth:`scan_pose`), or None if it was skipped.
+        """
         robot = self._accept("scan", msg.robot_id, msg.stamp)
-        if robot is not None:
-            self._scans.append((msg, robot.pose_keys[-1], robot.offset.copy()))
+        if robot is None:
+            return None
+        index = len(self._scans)
+        keyframe = robot.pose_keys[-1]
+        self._scans.append((msg, keyframe, robot.offset.copy()))
+        self._scans_by_keyframe.setdefault(keyframe, []).append(index)
+        return index
 
     # ------------------------------------------------------------------ optimisation
 
@@ -380,9 +389,18 @@ class SlamBackend:
         """``(robot_id, index)`` of keyframes moved > correction_threshold_m by the last update."""
         return list(self._moved)
 
+    def scan_pose(self, index: int) -> np.ndarray:
+        """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
+        _, key, offset = self._scans[index]
+        return compose(pose3_to_planar(self._pose_estimate(key)), offset)
+
+    def scans_of_keyframes(self, keyframes: list[tuple[int, int]]) -> list[int]:
+        """Indices of the scans attached to the ``(robot_id, index)`` keyframes."""
+        found: list[int] = []
+        for robot_id, index in keyframes:
+            found.extend(self._scans_by_keyframe.get(keys.pose_key(robot_id, index), []))
+        return found
+
     def posed_scans(self) -> list[tuple[LidarScan, np.ndarray]]:
         """Every stored scan with its current world pose ``[x, y, theta]``."""
-        return [
-            (scan, compose(pose3_to_planar(self._pose_estimate(key)), offset))
-            for scan, key, offset in self._scans
-        ]
+        return [(scan, self.scan_pose(i)) for i, (scan, _, _) in enumerate(self._scans)]
