@@ -1,0 +1,330 @@
+"""Frontier allocation as a discrete factor graph (thesis §4.6, eqs. 4.37-4.42).
+
+One variable x_i per robot over the clusters it can reach. Eq. 4.37 maximises
+
+    prod_i phi_i(x_i) * prod_{i<j} psi_ij(x_i, x_j),
+    phi_i = exp(-alpha d(r_i, x_i) + beta s(x_i))                              (4.40)
+    psi_ij = e^lambda if x_i = x_j else e                                     (4.41)
+
+so, as a MAP problem in log form (what this module computes and reports as
+``log_value``):
+
+    x* = argmax_x  J(x),  J(x) = sum_i [-alpha d_i(x_i) + beta s(x_i)]
+                                 + sum_{i<j} (lambda if x_i = x_j else 1)
+       = argmin_x  sum_i [alpha d_i(x_i) - beta s(x_i)]
+                   + (1 - lambda) * #{i<j : x_i = x_j}   (+ a constant).
+
+Eq. 4.42 subtracts psi_ij itself rather than log psi_ij = lambda or 1; the correct
+negative log-likelihood (4.39) is the line above: with lambda << 1 a shared cluster costs
+1 - lambda > 0, the robots are pushed apart. "Strong" conflict penalty means lambda << 0.
+
+Exact solution: GTSAM ``DiscreteFactorGraph.optimize()`` (max-product variable
+elimination). The pairwise factors connect every pair of robots, so its cost grows as the
+product of the domain sizes. Two exact reductions keep it small: unreachable clusters are
+not in a robot's domain, and when lambda <= 1 each robot keeps only its N best clusters
+by unary value (N = robots): if robot i's choice were outside its N best, one of those
+is chosen by none of the other N - 1 robots, and moving i there raises its unary and
+adds no conflict, so an optimum never needs the others. Beyond
+``exact_max_joint_assignments`` the approximate solver is used: several starts (each
+robot's best; sequential greedy) improved by single-robot best responses and joint
+best responses of robot pairs until no move helps (a 2-opt local search).
+
+A robot with no reachable cluster is idle. Sharing is allowed (penalised), so every other
+robot gets a cluster: no "none" value is needed in the factor graph.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import gtsam
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from acslam.config import AllocationConfig
+from acslam.exploration.clustering import FrontierCluster
+from acslam.mapping.costmap import Costmap
+from acslam.planning.astar import NoPathError, distances_from, snap_to_free
+
+_MIN_LOG_FACTOR = -600.0
+"""Factor values below e^-600 are stored as e^-600 (doubles underflow near e^-745)."""
+
+
+@dataclass(frozen=True)
+class Allocation:
+    """Which cluster each robot goes to.
+
+    ``cluster_of_robot[i]``: index into the clusters list, or ``None`` (idle: no cluster
+    reachable). ``distances_m``: (robots, clusters) d used, inf where unreachable.
+    ``log_value``: J of the assignment (module docstring). ``solver``: "exact",
+    "approximate", "hungarian" or "greedy".
+    """
+
+    method: str
+    solver: str
+    cluster_of_robot: tuple[int | None, ...]
+    distances_m: np.ndarray
+    log_value: float
+
+    def status(self, robot: int) -> Literal["assigned", "idle"]:
+        return "idle" if self.cluster_of_robot[robot] is None else "assigned"
+
+
+# --------------------------------------------------------------------------- objective
+
+
+def unary_log_factors(
+    distances_m: np.ndarray, utilities: np.ndarray, alpha: float, beta: float
+) -> np.ndarray:
+    """(robots, clusters) log phi = -alpha d + beta s; -inf where d is inf (unreachable)."""
+    d = np.asarray(distances_m, dtype=float)
+    with np.errstate(invalid="ignore"):
+        unary = -alpha * d + beta * np.asarray(utilities, dtype=float)[None, :]
+    unary[~np.isfinite(d)] = -np.inf
+    return unary
+
+
+def log_objective(
+    assignment: list[int | None] | tuple[int | None, ...],
+    unary: np.ndarray,
+    conflict_lambda: float,
+) -> float:
+    """J(x) over the assigned robots (module docstring); idle robots contribute nothing."""
+    chosen = [(i, k) for i, k in enumerate(assignment) if k is not None]
+    value = sum(float(unary[i, k]) for i, k in chosen)
+    for (_, a), (_, b) in itertools.combinations(chosen, 2):
+        value += conflict_lambda if a == b else 1.0
+    return value
+
+
+# --------------------------------------------------------------------------- solvers
+
+
+def _domains(unary: np.ndarray, conflict_lambda: float) -> list[np.ndarray]:
+    """Per robot, the clusters worth considering (reachable; N best when lambda <= 1)."""
+    robots = unary.shape[0]
+    domains = []
+    for row in unary:
+        reachable = np.flatnonzero(np.isfinite(row))
+        if conflict_lambda <= 1.0 and len(reachable) > robots:
+            best = np.argsort(-row[reachable], kind="stable")[:robots]
+            reachable = np.sort(reachable[best])
+        domains.append(reachable)
+    return domains
+
+
+def joint_assignment_count(unary: np.ndarray, conflict_lambda: float) -> int:
+    """Size of the exact problem after the reductions: product of the domain sizes."""
+    return math.prod(len(d) for d in _domains(unary, conflict_lambda))
+
+
+def solve_exact(unary: np.ndarray, conflict_lambda: float) -> list[int]:
+    """Max-product MAP on a GTSAM DiscreteFactorGraph; every row needs a finite entry.
+
+    Robots with a single candidate are fixed and folded into the others' unary factors
+    (conditioning, exact): GTSAM 4.3 rejects pairwise factors on a cardinality-1 variable
+    ("Product factor is 0.0").
+    """
+    domains = _domains(unary, conflict_lambda)
+    log_phi = [unary[i, domain] - unary[i, domain].max() for i, domain in enumerate(domains)]
+    fixed = [i for i, domain in enumerate(domains) if len(domain) == 1]
+    free = [i for i, domain in enumerate(domains) if len(domain) > 1]
+    for i in free:
+        for j in fixed:
+            log_phi[i] = log_phi[i] + np.where(domains[i] == domains[j][0], conflict_lambda - 1, 0)
+    result = [int(domain[0]) for domain in domains]
+    if not free:
+        return result
+    graph = gtsam.DiscreteFactorGraph()
+    for key, i in enumerate(free):
+        table = np.exp(np.maximum(log_phi[i] - log_phi[i].max(), _MIN_LOG_FACTOR))
+        graph.add((key, len(domains[i])), table.tolist())
+    # psi scaled by 1/e: 1 for different clusters, e^(lambda - 1) for the same one.
+    same = math.exp(max(conflict_lambda - 1.0, _MIN_LOG_FACTOR))
+    for (ka, i), (kb, j) in itertools.combinations(enumerate(free), 2):
+        table = np.where(domains[i][:, None] == domains[j][None, :], same, 1.0)
+        if (table != 1.0).any():
+            graph.add([(ka, len(domains[i])), (kb, len(domains[j]))], table.ravel().tolist())
+    values = graph.optimize()
+    for key, i in enumerate(free):
+        result[i] = int(domains[i][values[key]])
+    return result
+
+
+def _penalty_counts(assignment: np.ndarray, clusters: int) -> np.ndarray:
+    return np.bincount(assignment, minlength=clusters).astype(float)
+
+
+def _local_repair(unary: np.ndarray, penalty: float, assignment: np.ndarray) -> np.ndarray:
+    """Best responses of single robots and of robot pairs until none improves."""
+    robots, clusters = unary.shape
+    x = assignment.copy()
+    same_pair = penalty * np.eye(clusters)
+    improved = True
+    while improved:
+        improved = False
+        counts = _penalty_counts(x, clusters)
+        for i in range(robots):
+            counts[x[i]] -= 1
+            score = unary[i] - penalty * counts
+            best = int(np.argmax(score))
+            if score[best] > score[x[i]] + 1e-12:
+                x[i] = best
+                improved = True
+            counts[x[i]] += 1
+        for i, j in itertools.combinations(range(robots), 2):
+            counts[x[i]] -= 1
+            counts[x[j]] -= 1
+            score = (
+                (unary[i] - penalty * counts)[:, None]
+                + (unary[j] - penalty * counts)[None, :]
+                - same_pair
+            )
+            a, b = np.unravel_index(int(np.argmax(score)), score.shape)
+            if score[a, b] > score[x[i], x[j]] + 1e-12:
+                x[i], x[j] = int(a), int(b)
+                improved = True
+            counts[x[i]] += 1
+            counts[x[j]] += 1
+    return x
+
+
+def solve_approximate(unary: np.ndarray, conflict_lambda: float) -> list[int]:
+    """Greedy starts plus pairwise local repair; every row needs a finite entry."""
+    robots, clusters = unary.shape
+    penalty = 1.0 - conflict_lambda
+    independent = np.argmax(unary, axis=1)
+    sequential = np.zeros(robots, dtype=np.int64)
+    counts = np.zeros(clusters)
+    for i in np.argsort(-unary.max(axis=1), kind="stable"):
+        sequential[i] = int(np.argmax(unary[i] - penalty * counts))
+        counts[sequential[i]] += 1
+    best: list[int] = []
+    best_value = -math.inf
+    for start in (independent, sequential):
+        candidate = _local_repair(unary, penalty, start).tolist()
+        value = log_objective(candidate, unary, conflict_lambda)
+        if value > best_value:
+            best, best_value = candidate, value
+    return best
+
+
+def _fill_with_best(assignment: list[int | None], unary: np.ndarray) -> list[int | None]:
+    """Robots left without a cluster take their best reachable one (shared)."""
+    return [
+        int(np.argmax(unary[i])) if k is None and np.isfinite(unary[i]).any() else k
+        for i, k in enumerate(assignment)
+    ]
+
+
+def _hungarian(unary: np.ndarray) -> list[int | None]:
+    cost = np.where(np.isfinite(unary), -unary, 1e12)
+    rows, cols = linear_sum_assignment(cost)
+    assignment: list[int | None] = [None] * unary.shape[0]
+    for i, k in zip(rows, cols, strict=True):
+        if np.isfinite(unary[i, k]):
+            assignment[i] = int(k)
+    return _fill_with_best(assignment, unary)
+
+
+def _greedy_nearest(distances_m: np.ndarray) -> list[int | None]:
+    robots, clusters = distances_m.shape
+    assignment: list[int | None] = [None] * robots
+    taken = np.zeros(clusters, dtype=bool)
+    for flat in np.argsort(distances_m, axis=None, kind="stable"):
+        i, k = divmod(int(flat), clusters)
+        if np.isfinite(distances_m[i, k]) and assignment[i] is None and not taken[k]:
+            assignment[i] = k
+            taken[k] = True
+    return _fill_with_best(assignment, -distances_m)
+
+
+# --------------------------------------------------------------------------- front end
+
+
+def cluster_distances_m(
+    robot_cells: np.ndarray,
+    clusters: list[FrontierCluster],
+    costmap: Costmap,
+    config: AllocationConfig,
+    metric: Literal["path", "euclidean", "unchecked-euclidean"],
+) -> np.ndarray:
+    """(robots, clusters) d: Dijkstra path cost per robot, or straight-line metres.
+
+    "euclidean" keeps the straight line only where a path exists; "unchecked-euclidean"
+    is the thesis's d, with no Dijkstra at all.
+    """
+    spec = costmap.spec
+    cells = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
+    targets = np.array([c.target_cell for c in clusters], dtype=np.int64).reshape(-1, 2)
+    robots_m = spec.cell_to_world(cells)
+    targets_m = spec.cell_to_world(targets)
+    euclidean = np.linalg.norm(robots_m[:, None, :] - targets_m[None, :, :], axis=2)
+    if metric == "unchecked-euclidean":
+        return euclidean
+    max_snap_cells = math.floor(config.start_snap_m / spec.resolution_m)
+    distances = np.full((len(cells), len(targets)), np.inf)
+    for i, cell in enumerate(cells):
+        try:
+            start = snap_to_free(costmap.lethal, (int(cell[0]), int(cell[1])), max_snap_cells)
+        except NoPathError:
+            continue
+        # With weight 0, astar's step factor computes 0 * inf on lethal cells (never
+        # entered, so the NaN is harmless).
+        with np.errstate(invalid="ignore"):
+            g = distances_from(
+                costmap.cost,
+                costmap.lethal,
+                (int(start[0]), int(start[1])),
+                spec.resolution_m,
+                config.path_cost_weight,
+            )
+        distances[i] = g[targets[:, 0], targets[:, 1]]
+    if metric == "euclidean":
+        return np.where(np.isfinite(distances), euclidean, np.inf)
+    return distances
+
+
+def allocate(
+    robot_cells: np.ndarray,
+    clusters: list[FrontierCluster],
+    costmap: Costmap,
+    config: AllocationConfig,
+) -> Allocation:
+    """Assign each robot (``[row, col]`` cells) a cluster with ``config.method``."""
+    robots = len(np.asarray(robot_cells).reshape(-1, 2))
+    if config.method == "thesis":
+        metric: Literal["path", "euclidean", "unchecked-euclidean"] = "unchecked-euclidean"
+    else:
+        metric = config.distance_metric
+    if not clusters:
+        empty = np.zeros((robots, 0))
+        return Allocation(config.method, "exact", (None,) * robots, empty, 0.0)
+    distances = cluster_distances_m(robot_cells, clusters, costmap, config, metric)
+    if config.utility == "size":
+        utilities = np.array([c.size_cells for c in clusters], dtype=float)
+    else:
+        utilities = np.array([c.information_gain_cells for c in clusters], dtype=float)
+    unary = unary_log_factors(distances, utilities, config.alpha, config.beta)
+    active = np.flatnonzero(np.isfinite(unary).any(axis=1))
+    assignment: list[int | None] = [None] * robots
+    if config.method == "hungarian":
+        solver, assignment = "hungarian", _hungarian(unary)
+    elif config.method == "greedy":
+        solver, assignment = "greedy", _greedy_nearest(distances)
+    elif len(active):
+        sub = unary[active]
+        size = joint_assignment_count(sub, config.conflict_lambda)
+        if size <= config.exact_max_joint_assignments:
+            solver, chosen = "exact", solve_exact(sub, config.conflict_lambda)
+        else:
+            solver, chosen = "approximate", solve_approximate(sub, config.conflict_lambda)
+        for i, k in zip(active, chosen, strict=True):
+            assignment[int(i)] = k
+    else:
+        solver = "exact"
+    value = log_objective(assignment, unary, config.conflict_lambda)
+    return Allocation(config.method, solver, tuple(assignment), distances, value)

@@ -1,0 +1,70 @@
+"""DBSCAN frontier clusters: separation, sizes, snapped targets, information gain."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from acslam.config import CostmapConfig, ExplorationConfig
+from acslam.exploration.clustering import UnknownDiscCounter, cluster_frontiers
+from acslam.grid import GridSpec
+from acslam.mapping.costmap import compute_costmap
+
+RES_M = 0.05
+SPEC = GridSpec(0.0, 0.0, RES_M, 100, 100)
+CONFIG = ExplorationConfig(dbscan_eps_m=0.1, dbscan_min_points=3, min_cluster_size=3)
+
+
+def test_two_separated_lines_give_two_clusters_of_the_right_sizes() -> None:
+    values = np.zeros(SPEC.shape, dtype=np.int8)
+    values[:, 60:] = -1
+    line_a = np.stack([np.arange(10, 30), np.full(20, 59)], axis=1)  # 20 cells
+    line_b = np.stack([np.arange(50, 62), np.full(12, 59)], axis=1)  # 12 cells, 1 m away
+    costmap = compute_costmap(values, SPEC, CostmapConfig(), 0.1)
+    clusters = cluster_frontiers(np.concatenate([line_a, line_b]), values, SPEC, costmap, CONFIG)
+    assert [c.size_cells for c in clusters] == [20, 12]
+    for cluster, line in zip(clusters, (line_a, line_b), strict=True):
+        assert {tuple(c) for c in cluster.cells.tolist()} == {tuple(c) for c in line.tolist()}
+        assert tuple(cluster.target_cell) in {tuple(c) for c in line.tolist()}
+        np.testing.assert_allclose(cluster.centroid_m, SPEC.cell_to_world(line).mean(axis=0))
+
+
+def test_noise_and_small_clusters_are_dropped() -> None:
+    values = np.zeros(SPEC.shape, dtype=np.int8)
+    costmap = compute_costmap(values, SPEC, CostmapConfig(), 0.1)
+    isolated = np.array([[5, 5], [50, 50], [90, 20]])
+    assert cluster_frontiers(isolated, values, SPEC, costmap, CONFIG) == []
+
+
+def test_c_shaped_cluster_snaps_its_target_onto_a_standable_cluster_cell() -> None:
+    """A frontier arc around a block: the centroid falls inside the block (a wall)."""
+    values = np.zeros(SPEC.shape, dtype=np.int8)
+    values[40:60, 40:60] = 100  # the block
+    ring = [(r, c) for r in range(36, 64) for c in range(36, 64)]
+    arc = np.array([(r, c) for r, c in ring if max(abs(r - 49.5), abs(c - 49.5)) > 13 and c < 62])
+    values[arc[:, 0], arc[:, 1]] = 0
+    costmap = compute_costmap(values, SPEC, CostmapConfig(), 0.1)
+    clusters = cluster_frontiers(arc, values, SPEC, costmap, CONFIG)
+    assert len(clusters) == 1
+    cluster = clusters[0]
+    centroid_cell = SPEC.world_to_cell(cluster.centroid_m)[0]
+    assert values[centroid_cell[0], centroid_cell[1]] == 100  # the raw centroid is in the wall
+    target = tuple(cluster.target_cell)
+    assert target in {tuple(c) for c in arc.tolist()}
+    assert not costmap.lethal[target]
+    # It is the nearest standable cluster cell to the centroid.
+    standable = arc[~costmap.lethal[arc[:, 0], arc[:, 1]]]
+    distance = np.linalg.norm(SPEC.cell_to_world(standable) - cluster.centroid_m, axis=1)
+    assert np.isclose(
+        np.linalg.norm(cluster.target_m - cluster.centroid_m), distance.min(), atol=1e-12
+    )
+
+
+def test_information_gain_counts_unknown_cells_in_the_sensor_disc() -> None:
+    rng = np.random.default_rng(3)
+    values = rng.choice(np.array([-1, 0, 100], dtype=np.int8), SPEC.shape)
+    radius_m = 0.8
+    counter = UnknownDiscCounter(values, RES_M, radius_m)
+    rows, cols = np.indices(SPEC.shape)
+    for cell in [(0, 0), (50, 50), (99, 3), (10, 95)]:
+        within = (rows - cell[0]) ** 2 + (cols - cell[1]) ** 2 <= (radius_m / RES_M) ** 2
+        assert counter.count(np.array(cell)) == int((within & (values == -1)).sum())
