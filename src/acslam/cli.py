@@ -97,6 +97,18 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
 @robots_option
 @seed_option
 @click.option(
+    "--planner",
+    type=click.Choice(["fgp", "dwa"]),
+    default=None,
+    help="Local planner [default: the scenario's, fgp].",
+)
+@click.option(
+    "--allocator",
+    type=click.Choice(["factor-graph", "hungarian", "greedy", "thesis"]),
+    default=None,
+    help="Frontier allocation method [default: the scenario's, factor-graph].",
+)
+@click.option(
     "--out",
     "out_dir",
     type=click.Path(file_okay=False, path_type=Path),
@@ -108,69 +120,101 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     "max_time_s",
     type=click.FloatRange(min=0, min_open=True),
     default=None,
-    help="Simulated seconds to run [default: the scenario's sim.max_time_s].",
+    help="Simulated seconds before the run stops [default: the scenario's sim.max_time_s].",
 )
 def run_command(
     scenario_name: str,
     robots: int | None,
     seed: int | None,
+    planner: str | None,
+    allocator: str | None,
     out_dir: Path | None,
     max_time_s: float | None,
 ) -> None:
-    """Run a scenario in the simulator and write the run folder."""
+    """Explore a scenario with the full server in the loop and write the run folder."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from acslam.runner import run_simulation
+    from acslam.runner import run_exploration
     from acslam.scenario import load_scenario
 
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
+    scenario = scenario.with_algorithms(local_planner=planner, allocation_method=allocator)
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"
-    duration_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
-    _console.print(
-        f"[bold]{scenario.config.name}[/]: {scenario.robot_count} robots, "
-        f"{duration_s:g} s simulated. The exploration server is not wired in yet: "
-        "robots wander by a scan-reactive script."
-    )
+    limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
+    reachable_m2 = scenario.reachable_area_m2
     with Progress(
         TextColumn("[progress.description]{task.description}"),
         BarColumn(),
-        TextColumn("{task.completed:.0f}/{task.total:.0f} s sim"),
+        TextColumn(
+            "{task.fields[sim]:>6.1f} s sim  explored {task.fields[explored]:>5.1f} m²"
+            "  frontiers {task.fields[frontiers]:>5}"
+        ),
         TimeElapsedColumn(),
         console=_console,
-        disable=not sys.stderr.isatty() and not sys.stdout.isatty(),
     ) as progress:
-        task = progress.add_task("simulating", total=duration_s)
-        summary = run_simulation(
-            scenario, duration_s, out_dir, on_progress=lambda t: progress.update(task, completed=t)
+        task = progress.add_task(
+            scenario.config.name, total=limit_s, sim=0.0, explored=0.0, frontiers=0
         )
+
+        def show(status, explored_m2: float) -> None:
+            progress.update(
+                task,
+                completed=status.time_s,
+                sim=status.time_s,
+                explored=explored_m2,
+                frontiers=status.frontier_cells,
+            )
+
+        metrics = run_exploration(scenario, out_dir, limit_s, on_progress=show)
+    _print_summary(metrics, reachable_m2)
+    _console.print(f"run folder: {out_dir}  (report: {out_dir / 'report.html'})")
+
+
+def _print_summary(metrics: dict, reachable_m2: float) -> None:
+    status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
     table = Table(
-        title=f"{scenario.config.name}: {summary.sim_time_s:.0f} s simulated in "
-        f"{summary.wall_time_s:.1f} s ({summary.real_time_factor:.0f}x real time)"
+        title=f"{metrics['scenario']}, {metrics['robots']} robots: {status} in "
+        f"{metrics['sim_time_s']:.1f} s simulated ({metrics['real_time_factor']:.1f}x real time)"
     )
     for column in (
         "robot",
-        "distance [m]",
-        "odometry drift [m]",
-        "wall hits",
-        "robot hits",
-        "scans",
-        "landmark obs.",
+        "time [s]",
+        "RMSE [m]",
+        "final error [m]",
+        "yaw RMSE [rad]",
+        "area [m²]",
     ):
         table.add_column(column, justify="right")
-    for robot in summary.robots:
+    for name, loc in metrics["localization"].items():
         table.add_row(
-            robot.name,
-            f"{robot.distance_m:.2f}",
-            f"{robot.odometry_drift_m:.3f}",
-            str(robot.wall_collisions),
-            str(robot.robot_collisions),
-            str(robot.scans),
-            str(robot.landmark_observations),
+            name,
+            f"{metrics['timing']['per_robot_s'][name]:.1f}",
+            f"{loc['rmse_m']:.3f}",
+            f"{loc['final_dist_m']:.3f}",
+            f"{loc['rmse_yaw_rad']:.3f}",
+            f"{metrics['coverage'][name]['area_m2']:.1f}",
         )
     _console.print(table)
-    _console.print(f"run folder: {out_dir}")
+    mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
+    _console.print(
+        f"explored {100 * coverage['explored_fraction_of_reachable']:.1f} % of the "
+        f"{reachable_m2:.1f} m² reachable; map accuracy {100 * mapping['accuracy']:.1f} %, "
+        f"TPR {100 * mapping['tpr']:.1f} %; collisions: {safety['obstacle_collisions']} wall, "
+        f"{safety['robot_collisions']} robot; stuck events {safety['stuck_events']}; "
+        f"server cycle {metrics['server_cycle_ms']['mean']:.1f} ms mean, "
+        f"{metrics['server_cycle_ms']['p95']:.1f} ms p95"
+    )
+
+
+@cli.command("report")
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+def report_command(run_dir: Path) -> None:
+    """Rebuild report.html and figures/ of a finished run without re-running it."""
+    from acslam.eval.report import rebuild_report
+
+    click.echo(f"report: {rebuild_report(run_dir)}")
 
 
 def main() -> None:

@@ -325,6 +325,9 @@ class AllocationConfig(Section):
     # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
     # sharing whenever there are enough clusters.
     conflict_lambda: FiniteFloat = 0.01
+    # A robot's current goal counts this much closer when re-allocating: switching is
+    # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
+    commitment_m: NonNegativeFloat = 2.0
     # d of eq. 4.40: "path" = costmap path length from one Dijkstra per robot (walls
     # respected; unreachable clusters excluded), "euclidean" = straight line (reachability
     # still checked). The "thesis" method always uses the straight line, unchecked.

@@ -34,6 +34,26 @@ class Scenario:
     def robot_count(self) -> int:
         return len(self.starts)
 
+    @property
+    def reachable_area_m2(self) -> float:
+        """Free area a robot disc can sweep from the first start (what exploring can map)."""
+        reachable = self.world.reachable_free(*self.starts[0, :2], self.config.robots.radius_m)
+        return float(reachable.sum()) * self.world.spec.resolution_m**2
+
+    def with_algorithms(
+        self, local_planner: str | None = None, allocation_method: str | None = None
+    ) -> Scenario:
+        """The same scenario with another local planner and/or allocation method."""
+        algorithms = self.config.algorithms
+        if local_planner is not None:
+            planning = algorithms.planning.model_copy(update={"local_planner": local_planner})
+            algorithms = algorithms.model_copy(update={"planning": planning})
+        if allocation_method is not None:
+            allocation = algorithms.allocation.model_copy(update={"method": allocation_method})
+            algorithms = algorithms.model_copy(update={"allocation": allocation})
+        config = self.config.model_copy(update={"algorithms": algorithms})
+        return Scenario(config, self.source, self.world, self.starts, self.landmarks)
+
 
 def _check_starts(starts: np.ndarray, world: World, radius_m: float, source: str, field: str):
     spec = world.spec

@@ -152,6 +152,10 @@ class Server:
 
     def step(self, messages: Iterable[RobotMessage], now_s: float) -> list[VelocityCommand]:
         """Run one server cycle on the messages received since the last one."""
+        with self.timer.measure("cycle"):
+            return self._step(messages, now_s)
+
+    def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[VelocityCommand]:
         with self.timer.measure("slam"):
             scans = self._ingest(messages)
             self.slam.update()
@@ -272,7 +276,13 @@ class Server:
             return
         robot_cells = window.spec.world_to_cell(poses[:, :2])
         robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
-        allocation = allocate(robot_cells, self._clusters, costmap, self.config.algorithms.allocation)
+        allocation = allocate(
+            robot_cells,
+            self._clusters,
+            costmap,
+            self.config.algorithms.allocation,
+            [self._matching_cluster(task) for task in self.tasks],
+        )
         planning = self.config.algorithms.planning
         for i, task in enumerate(self.tasks):
             choice = allocation.cluster_of_robot[i]
@@ -309,6 +319,17 @@ class Server:
             and now_s - max(idle_since) >= self.config.algorithms.server.finish_after_idle_s
         )
 
+    def _matching_cluster(self, task: RobotTask) -> int | None:
+        """The current cluster that continues the robot's goal: its target is nearest the
+        old target, within the goal tolerance plus the clustering radius."""
+        if task.cluster is None or not self._clusters:
+            return None
+        targets = np.array([c.target_m for c in self._clusters])
+        gaps = np.linalg.norm(targets - task.cluster.target_m, axis=1)
+        best = int(np.argmin(gaps))
+        server, exploration = self.config.algorithms.server, self.config.algorithms.exploration
+        return best if gaps[best] <= server.goal_tolerance_m + exploration.dbscan_eps_m else None
+
     def _local_plan(self, poses: np.ndarray, now_s: float) -> list[tuple[float, float]]:
         """(v, omega) for every robot: recovery overrides, FGP jointly, or DWA each."""
         costmap, window = self._costmap, self._window
@@ -319,7 +340,9 @@ class Server:
         # The distance field is to cell centres, walls are cell squares: half a cell
         # diagonal less makes the planners' clearance a lower bound of the truth.
         res = window.spec.resolution_m
-        field = DistanceField(np.maximum(costmap.distance_m - res / math.sqrt(2.0), 0.0), window.spec)
+        field = DistanceField(
+            np.maximum(costmap.distance_m - res / math.sqrt(2.0), 0.0), window.spec
+        )
         reach_m = planning.horizon_s * self.config.robots.max_v_mps
         states, goals, active, overrides = [], [], [], {}
         for i, task in enumerate(self.tasks):
@@ -346,7 +369,9 @@ class Server:
             if self._fgp is not None:
                 planned = self._fgp.plan(states, goals, field, active).commands
             else:
-                planned = [self._dwa_command(k, active, states, goals, field) for k in range(len(active))]
+                planned = [
+                    self._dwa_command(k, active, states, goals, field) for k in range(len(active))
+                ]
             for i, command in zip(active, planned, strict=True):
                 commands[i] = overrides.get(i, (float(command[0]), float(command[1])))
         for i, task in enumerate(self.tasks):

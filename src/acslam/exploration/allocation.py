@@ -293,8 +293,14 @@ def allocate(
     clusters: list[FrontierCluster],
     costmap: Costmap,
     config: AllocationConfig,
+    current: list[int | None] | None = None,
 ) -> Allocation:
-    """Assign each robot (``[row, col]`` cells) a cluster with ``config.method``."""
+    """Assign each robot (``[row, col]`` cells) a cluster with ``config.method``.
+
+    ``current[i]`` is the cluster robot i is heading to, if any: its distance counts
+    ``config.commitment_m`` less, so a robot switches goals only for a clearly better one
+    (without it, re-allocating every few seconds makes robots dither between frontiers).
+    """
     robots = len(np.asarray(robot_cells).reshape(-1, 2))
     if config.method == "thesis":
         metric: Literal["path", "euclidean", "unchecked-euclidean"] = "unchecked-euclidean"
@@ -304,6 +310,9 @@ def allocate(
         empty = np.zeros((robots, 0))
         return Allocation(config.method, "exact", (None,) * robots, empty, 0.0)
     distances = cluster_distances_m(robot_cells, clusters, costmap, config, metric)
+    for robot, cluster in enumerate(current or []):
+        if cluster is not None and np.isfinite(distances[robot, cluster]):
+            distances[robot, cluster] = max(0.0, distances[robot, cluster] - config.commitment_m)
     if config.utility == "size":
         utilities = np.array([c.size_cells for c in clusters], dtype=float)
     else:

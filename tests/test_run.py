@@ -1,0 +1,120 @@
+"""The main job end to end: robots, server and metrics in the closed loop."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from acslam.cli import cli
+from acslam.config import builtin_scenario_names
+from acslam.runner import run_exploration
+from acslam.scenario import load_scenario
+
+METRIC_KEYS = {
+    "scenario",
+    "robots",
+    "seed",
+    "planner",
+    "allocator",
+    "completed",
+    "reason",
+    "sim_time_s",
+    "wall_time_s",
+    "real_time_factor",
+    "timing",
+    "localization",
+    "coverage",
+    "mapping",
+    "safety",
+    "server_cycle_ms",
+}
+TABLE_TITLES = (
+    "Timing (Table 5.1)",
+    "Localization (Table 5.2)",
+    "Coverage per robot combination (Table 5.3)",
+    "Mapping accuracy (Table 5.4)",
+    "Safety",
+    "Server cycle [ms]",
+)
+
+
+@pytest.mark.parametrize("robots", [1, 2])
+def test_small_team_explores_thesis_exp1(tmp_path: Path, robots: int) -> None:
+    scenario = load_scenario("thesis-exp1", robots=robots)
+    metrics = run_exploration(scenario, tmp_path, max_time_s=400.0)
+    assert set(metrics) == METRIC_KEYS
+    assert metrics["completed"], metrics["reason"]
+    assert metrics["coverage"]["explored_fraction_of_reachable"] >= 0.99
+    assert metrics["safety"]["obstacle_collisions"] == 0
+    assert metrics["safety"]["robot_collisions"] == 0
+    # The thesis's real robots mapped exp1 with 91.9-93.7 % accuracy (Table 5.4).
+    assert metrics["mapping"]["accuracy"] >= 0.85
+    names = [f"robot_{i}" for i in range(robots)]
+    assert list(metrics["localization"]) == names
+    assert set(metrics["timing"]["per_robot_s"]) == set(names)
+    assert metrics["coverage"]["+".join(names)]["rate"] == pytest.approx(1.0)
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["completed"] is True
+    for path in (
+        "config.yaml",
+        "map.yaml",
+        "map.pgm",
+        "report.html",
+        "run.npz",
+        "figures/confusion.png",
+        "figures/trajectories.png",
+        "figures/explored_area.png",
+        "figures/exploration_robot_0.png",
+        "trajectories/robot_0.estimated.tum",
+        "trajectories/robot_0.groundtruth.tum",
+    ):
+        assert (tmp_path / path).is_file(), path
+    page = (tmp_path / "report.html").read_text()
+    for title in TABLE_TITLES:
+        assert title in page
+
+
+def test_time_limit_still_writes_metrics_and_report_rebuilds(tmp_path: Path) -> None:
+    metrics = run_exploration(load_scenario("thesis-exp2", robots=2), tmp_path, max_time_s=3.0)
+    assert metrics["completed"] is False
+    assert metrics["reason"] == "time limit"
+    assert json.loads((tmp_path / "metrics.json").read_text())["reason"] == "time limit"
+    (tmp_path / "report.html").unlink()
+    result = subprocess.run(
+        ["acslam", "report", str(tmp_path)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Timing (Table 5.1)" in (tmp_path / "report.html").read_text()
+
+
+def test_report_of_a_folder_that_is_no_run(tmp_path: Path) -> None:
+    result = subprocess.run(
+        ["acslam", "report", str(tmp_path)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 1
+    assert "metrics.json: not found" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("name", builtin_scenario_names())
+def test_every_builtin_scenario_runs(tmp_path: Path, name: str) -> None:
+    result = CliRunner().invoke(
+        cli, ["run", "--scenario", name, "--max-time", "1", "--out", str(tmp_path)]
+    )
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["scenario"] == name
+    assert metrics["reason"] == "time limit"
+
+
+@pytest.mark.parametrize("option", [["--planner", "dwa"], ["--allocator", "hungarian"]])
+def test_algorithm_options_reach_the_run(tmp_path: Path, option: list[str]) -> None:
+    result = CliRunner().invoke(cli, ["run", *option, "--max-time", "1", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    key = "planner" if option[0] == "--planner" else "allocator"
+    assert metrics[key] == option[1]
