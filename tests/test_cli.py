@@ -15,7 +15,9 @@ from acslam.config import builtin_scenario_names
 from acslam.worlds.mapio import load_map
 
 
-@pytest.mark.parametrize("command", [[], ["scenarios"], ["map"], ["run"]])
+@pytest.mark.parametrize(
+    "command", [[], ["scenarios"], ["map"], ["run"], ["report"], ["slam"], ["slam", "mrclam"]]
+)
 def test_every_command_has_help(command: list[str]) -> None:
     result = CliRunner().invoke(cli, [*command, "--help"])
     assert result.exit_code == 0, result.output
@@ -55,4 +57,17 @@ def test_unknown_scenario_is_one_line_error() -> None:
     )
     assert result.returncode == 1
     assert result.stderr.startswith("acslam: error: atlantis: unknown scenario")
+    assert "Traceback" not in result.stderr
+
+
+def test_slam_mrclam_on_a_missing_dataset_is_one_line_error(tmp_path: Path) -> None:
+    result = subprocess.run(
+        ["acslam", "slam", "mrclam", str(tmp_path / "none"), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 1
+    assert result.stderr.startswith("acslam: error: ")
+    assert "Barcodes.dat: file not found" in result.stderr
     assert "Traceback" not in result.stderr
