@@ -60,7 +60,9 @@ class LidarScan:
     """One 2D LiDAR sweep in the robot frame.
 
     ``angles`` (rad) and ``ranges`` (m) have shape (N,). A beam with no return within
-    ``range_max_m`` has range ``inf``; NaN and negative ranges are invalid.
+    ``range_max_m`` has range ``inf`` (free as far as the sensor reaches); a range of 0
+    is an invalid reading (e.g. an object closer than the sensor's minimum range), which
+    says nothing about the space along the beam. NaN and negative ranges are rejected.
     """
 
     robot_id: int

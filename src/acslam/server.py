@@ -202,23 +202,21 @@ class Server:
                     scans.append((index, message))
         return scans
 
-    def _without_robots(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
-        """The scan minus beams that end on another robot (robots are not walls)."""
-        others = [
-            self.slam.latest_pose(j)[:2] for j in range(self.robot_count) if j != scan.robot_id
-        ]
-        if not others:
-            return scan
+    def _mappable(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
+        """The scan minus invalid (0) readings and beams that end on another robot.
+
+        Robots are not walls: their returns would stay in the map after they moved on.
+        """
+        keep = scan.ranges > 0
         angles = scan.angles + pose[2]
         ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
         reach = self.config.robots.radius_m + self.config.algorithms.server.robot_filter_margin_m
-        near = np.zeros(len(scan.ranges), dtype=bool)
-        for xy in others:
-            with np.errstate(invalid="ignore"):
-                near |= np.linalg.norm(ends - xy, axis=1) < reach
-        if not near.any():
+        for j in range(self.robot_count):
+            if j != scan.robot_id:
+                with np.errstate(invalid="ignore"):
+                    keep &= ~(np.linalg.norm(ends - self.slam.latest_pose(j)[:2], axis=1) < reach)
+        if keep.all():
             return scan
-        keep = ~near
         return LidarScan(
             scan.robot_id, scan.stamp, scan.angles[keep], scan.ranges[keep], scan.range_max_m
         )
@@ -227,7 +225,7 @@ class Server:
         """Add new scans at their keyframe-relative pose; move scans SLAM corrected."""
         for index, scan in scans:
             pose = self.slam.scan_pose(index)
-            kept = self._without_robots(scan, pose)
+            kept = self._mappable(scan, pose)
             self.team_map.add_scan(scan.robot_id, index, kept.ranges, kept.angles, pose)
             self._new_scan_cells.append(self.map_spec.world_to_cell(pose[:2])[0])
         moved = self.slam.moved_keyframes()
@@ -344,9 +342,13 @@ class Server:
             np.maximum(costmap.distance_m - res / math.sqrt(2.0), 0.0), window.spec
         )
         reach_m = planning.horizon_s * self.config.robots.max_v_mps
-        states, goals, active, overrides = [], [], [], {}
+        # Every robot takes part, so the others plan around it: a robot without a path
+        # holds its position as its goal (and yields if another one comes close).
+        states, goals, overrides = [], [], {}
         for i, task in enumerate(self.tasks):
             state = RobotState(*poses[i], *task.velocity)
+            states.append(state)
+            goals.append(state.xy_m)
             if task.path_m is None:
                 continue
             remaining = remaining_length_m(task.path_m, state.xy_m)
@@ -361,19 +363,12 @@ class Server:
                     self._fgp.reset(i)
             if step.command is not None:
                 overrides[i] = step.command
-            states.append(state)
-            goals.append(lookahead_point(task.path_m, state.xy_m, reach_m))
-            active.append(i)
-        commands = [(0.0, 0.0)] * self.robot_count
-        if active:
-            if self._fgp is not None:
-                planned = self._fgp.plan(states, goals, field, active).commands
-            else:
-                planned = [
-                    self._dwa_command(k, active, states, goals, field) for k in range(len(active))
-                ]
-            for i, command in zip(active, planned, strict=True):
-                commands[i] = overrides.get(i, (float(command[0]), float(command[1])))
+            goals[i] = lookahead_point(task.path_m, state.xy_m, reach_m)
+        if self._fgp is not None:
+            planned = self._fgp.plan(states, goals, field).commands
+        else:
+            planned = [self._dwa_command(i, states, goals, field) for i in range(len(states))]
+        commands = [overrides.get(i, (float(v), float(w))) for i, (v, w) in enumerate(planned)]
         for i, task in enumerate(self.tasks):
             task.velocity = commands[i]
         return commands
@@ -381,7 +376,6 @@ class Server:
     def _dwa_command(
         self,
         k: int,
-        active: list[int],
         states: list[RobotState],
         goals: list[np.ndarray],
         field: DistanceField,

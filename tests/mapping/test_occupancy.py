@@ -184,3 +184,11 @@ def test_grid_for_bounds_covers_the_rectangle() -> None:
     grid = LogOddsGrid.for_bounds(-1.0, 2.0, 3.02, 4.0, MappingConfig(resolution_m=0.1))
     assert grid.spec.shape == (20, 41)
     assert (grid.spec.origin_x_m, grid.spec.origin_y_m) == (-1.0, 2.0)
+
+
+def test_invalid_zero_readings_change_nothing() -> None:
+    spec = GridSpec(0.0, 0.0, 0.05, 80, 80)
+    grid = LogOddsGrid(spec, MappingConfig())
+    grid.integrate(np.zeros(8), np.linspace(-np.pi, np.pi, 8, endpoint=False),
+                   np.array([2.0, 2.0, 0.0]))
+    assert not grid.known_mask().any()

@@ -50,7 +50,7 @@ def test_ranges_equal_analytic_wall_distances() -> None:
         assert (scan.angles == sensor.angles_rad).all()
 
 
-def test_beyond_range_max_and_below_range_min_are_inf() -> None:
+def test_beyond_range_max_is_inf_and_below_range_min_is_invalid() -> None:
     world = box_world(4.0, 3.0)
     config = LidarConfig(range_min_m=0.3, range_max_m=1.0, **NOISELESS)
     scan = LidarSensor(config, world, np.random.default_rng(0)).scan(
@@ -58,7 +58,9 @@ def test_beyond_range_max_and_below_range_min_are_inf() -> None:
     )
     true = np.array([_box_distance(0.25, 1.5, a, 3.95, 2.95) for a in scan.angles])
     valid = (true >= 0.3) & (true <= 1.0)
-    assert np.isinf(scan.ranges[~valid]).all()  # behind (0.2 m) and ahead (3.7 m)
+    assert np.isinf(scan.ranges[true > 1.0]).all()  # ahead (3.7 m): no return
+    assert (scan.ranges[true < 0.3] == 0.0).all()  # behind (0.2 m): invalid reading
+    assert (true < 0.3).any() and (true > 1.0).any()
     assert np.allclose(scan.ranges[valid], true[valid], atol=1e-9)
     assert valid.any() and (~valid).any()
 

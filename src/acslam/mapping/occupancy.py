@@ -108,6 +108,8 @@ def _scan_update(
     # scan clears them (a grazing neighbour beam must not erase a hit).
     for b in range(n):
         rng = ranges[b]
+        if rng <= 0.0:  # invalid reading (messages.LidarScan): says nothing
+            continue
         if rng <= range_max_m:
             length = rng
             hit[b] = True

@@ -15,8 +15,10 @@ straight ahead).
 Noise: each beam is cast along its nominal angle plus N(0, angle_noise_std^2) but
 reported at the nominal angle (the sensor's angle error), and the range gets
 N(0, sigma(r)^2) with sigma(r) = range_noise_std_m + range_noise_rel * r. Whether a beam
-returns is decided on the true range (range_min_m <= r <= range_max_m, else ``inf``);
-a noisy range is clamped at 0 so it stays a valid reading when range_min_m is 0.
+returns is decided on the true range: beyond range_max_m it is ``inf`` (no return: free
+space as far as the sensor reaches); closer than range_min_m it is 0, the invalid reading
+real LiDAR drivers report (the space along it is unknown, not free). A noisy range is
+clamped at 0.
 """
 
 from __future__ import annotations
@@ -152,8 +154,10 @@ def cast_scan(
                 rd = _ray_disc_m(pose_x_m, pose_y_m, dx, dy, discs[j, 0], discs[j, 1], discs[j, 2])
                 if rd < r:
                     r = rd
-        if r < range_min_m or r > range_max_m:
+        if r > range_max_m:
             out[k] = math.inf
+        elif r < range_min_m:
+            out[k] = 0.0
         else:
             out[k] = max(0.0, r + (noise_std_m + noise_rel * r) * range_normals[k])
     return out
