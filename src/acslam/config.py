@@ -425,6 +425,61 @@ class ServerConfig(Section):
     finish_after_idle_s: NonNegativeFloat = 4.0
 
 
+class ScanMatchingConfig(Section):
+    """LiDAR scan matching: point-to-line ICP, its covariance, verification, loop closures.
+
+    The noise model defaults to :class:`LidarConfig`'s (the simulated LDS-02); for another
+    sensor state its figures (a SICK LMS is ~0.01 m, no relative term). It weights each
+    residual and gives the covariance, so a model that is too optimistic is caught by the
+    residuals (the covariance is inflated when they exceed it), one too pessimistic is kept.
+    Gates are ours: the correspondence gate shrinks from ``gate_initial_m`` by
+    ``gate_decay`` per iteration to ``gate_min_m`` (never below ``inlier_sigmas`` predicted
+    sigmas), so a 0.3 m / 0.2 rad initial error is pulled in first and outliers cut later.
+    """
+
+    range_noise_std_m: NonNegativeFloat = 0.005
+    range_noise_rel: NonNegativeFloat = 0.015
+    angle_noise_std_rad: NonNegativeFloat = 0.002
+    # Residual sigmas never go below this (a noise-free model would divide by zero).
+    min_sigma_m: PositiveFloat = 1e-4
+    # Reference lines: PCA of each point's k nearest neighbours within line_max_extent_m;
+    # a line whose thickness exceeds line_planarity_sigmas predicted sigmas (a corner, an
+    # edge, clutter) is not used.
+    line_neighbors: Annotated[int, Field(ge=3)] = 9
+    line_max_extent_m: PositiveFloat = 1.0
+    line_planarity_sigmas: PositiveFloat = 3.0
+    gate_initial_m: PositiveFloat = 1.0
+    gate_min_m: PositiveFloat = 0.1
+    gate_decay: Annotated[float, Field(gt=0, le=1)] = 0.7
+    # Huber threshold on the whitened residual (95 % efficiency under Gaussian noise).
+    huber_k: PositiveFloat = 1.345
+    inlier_sigmas: PositiveFloat = 3.0
+    max_iterations: Annotated[int, Field(ge=1)] = 50
+    tolerance_m: PositiveFloat = 1e-6
+    tolerance_rad: PositiveFloat = 1e-6
+    # ... or when the step is below this many sigmas (its Mahalanobis length under H).
+    tolerance_sigmas: PositiveFloat = 0.1
+    min_correspondences: Annotated[int, Field(ge=3)] = 20
+    # Weak prior at the initial guess: a direction the scans do not constrain (a corridor's
+    # axis) stays at the guess with this sigma instead of an infinite one.
+    prior_sigma_m: PositiveFloat = 10.0
+    prior_sigma_rad: PositiveFloat = 3.0
+    covariance_floor_m: PositiveFloat = 0.001
+    covariance_floor_rad: PositiveFloat = 0.001
+    # Verification of a match (all must hold).
+    min_inlier_ratio: Probability = 0.6
+    max_rms_m: PositiveFloat = 0.1
+    max_correction_m: PositiveFloat = 0.5
+    max_correction_rad: PositiveFloat = 0.35
+    max_sigma_m: PositiveFloat = 0.05
+    max_sigma_rad: PositiveFloat = 0.02
+    max_condition: Annotated[float, Field(ge=1)] = 25.0
+    # Loop-closure candidates: keyframes closer than this, and (same robot) further apart
+    # in time than loop_min_separation_s so neighbours in the chain are not re-matched.
+    loop_radius_m: PositiveFloat = 2.0
+    loop_min_separation_s: NonNegativeFloat = 20.0
+
+
 class AlgorithmsConfig(Section):
     slam: SlamConfig = SlamConfig()
     mapping: MappingConfig = MappingConfig()
@@ -433,6 +488,7 @@ class AlgorithmsConfig(Section):
     allocation: AllocationConfig = AllocationConfig()
     planning: PlanningConfig = PlanningConfig()
     server: ServerConfig = ServerConfig()
+    scan_matching: ScanMatchingConfig = ScanMatchingConfig()
 
 
 # --------------------------------------------------------------------------- scenario
