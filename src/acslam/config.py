@@ -238,7 +238,13 @@ class SlamConfig(Section):
     with no candidate starts a new landmark only if every landmark is further than
     ``new_landmark_mahalanobis_gate`` (squared; 25 ~ 5 sigma): in between it is ambiguous
     and dropped, otherwise the 1 % of true re-observations outside the 99 % gate would
-    each spawn a duplicate landmark.
+    each spawn a duplicate landmark. The points of one frame are associated jointly (one
+    landmark takes at most one point); a point is used only if its assigned landmark has
+    PDA probability >= ``association_min_best_probability`` among the candidates no other
+    point took (else dropped as ambiguous), and soft factors go to candidates with
+    probability >= ``association_min_probability``. A new landmark is first tentative: it
+    enters the graph once seen in ``landmark_confirmations`` frames by the same robot, the
+    last within ``tentative_timeout_s`` of the previous; otherwise it is forgotten.
     """
 
     prior_sigma_xy_m: PositiveFloat = 0.01
@@ -259,6 +265,10 @@ class SlamConfig(Section):
     association_mahalanobis_gate: PositiveFloat = 11.34
     association_min_likelihood: NonNegativeFloat = 0.01
     new_landmark_mahalanobis_gate: PositiveFloat = 25.0
+    association_min_best_probability: Probability = 0.9
+    association_min_probability: Probability = 0.05
+    landmark_confirmations: Annotated[int, Field(ge=1)] = 3
+    tentative_timeout_s: PositiveFloat = 10.0
     isam_relinearize_threshold: PositiveFloat = 0.01
     correction_threshold_m: PositiveFloat = 0.05
 

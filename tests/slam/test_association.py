@@ -7,7 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from acslam.slam.association import euclidean_gate, gaussian_likelihood, score_candidates
+from acslam.slam.association import (
+    assign_frame,
+    euclidean_gate,
+    exclusive_probabilities,
+    gaussian_likelihood,
+    innovation_covariance,
+    pose_lever_jacobian,
+    score_candidates,
+)
 
 LANDMARKS = np.array(
     [
@@ -62,3 +70,33 @@ def test_no_landmarks_no_candidates() -> None:
         np.zeros(3), POINT_COV, np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3, 3)), 11.0, 0.0
     )
     assert len(cands) == 0
+
+
+def test_frame_assignment_is_mutually_exclusive() -> None:
+    """Two points both nearest to landmark 0: only one may take it; the other gets its
+    next option (landmark 1), and a point with nothing inside the gate stays unassigned."""
+    d2 = np.array([[0.5, 3.0], [1.0, 9.0], [np.inf, 20.0]])
+    assert list(assign_frame(d2, 11.34)) == [1, 0, -1]  # 3.0 + 1.0 < 0.5 + 9.0
+
+
+def test_exclusive_probabilities_ignore_landmarks_taken_by_other_points() -> None:
+    d2 = np.array([1.0, 1.0, 4.0])
+    log_norm = np.zeros(3)
+    cols, p = exclusive_probabilities(d2, log_norm, 11.34, np.array([False, True, False]))
+    assert list(cols) == [0, 2]
+    p0 = 1.0 / (1.0 + math.exp(-1.5))
+    np.testing.assert_allclose(p, [p0, 1 - p0])
+
+
+def test_cross_covariance_cancels_shared_drift() -> None:
+    """Pose and landmark that drifted together (cross-covariance = their covariance):
+    the innovation covariance is just the measurement's."""
+    lever = pose_lever_jacobian(np.eye(3), np.array([1.0, 0.0, 0.0]))
+    pose_cov = np.diag([1e-9, 1e-9, 1e-9, 0.5, 0.5, 1e-9])  # translation drift only
+    landmark_cov = lever @ pose_cov @ lever.T
+    cross = pose_cov @ lever.T
+    meas = 0.01 * np.eye(3)
+    s = innovation_covariance(lever, pose_cov, landmark_cov, cross, meas)
+    np.testing.assert_allclose(s, meas, atol=1e-8)
+    s_ignored = innovation_covariance(lever, pose_cov, landmark_cov, None, meas)
+    assert s_ignored[0, 0] > 1.0

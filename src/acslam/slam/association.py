@@ -5,7 +5,8 @@ world-frame landmark; we first map z into the world with the current pose estima
 d = T_i z - l_j. Its covariance is S = Sigma_lj + R Sigma_z R^T + J Sigma_pose J^T: the
 landmark's marginal, the measurement noise, and the pose uncertainty pushed through the
 lever arm (the thesis uses Sigma_j alone, which is singular-ish for a fresh landmark and
-overconfident for a drifting robot). The pose-landmark cross-covariance is neglected.
+overconfident for a drifting robot). ``score_candidates`` neglects the pose-landmark
+cross-covariance; the per-frame functions at the end (used by the back end) include it.
 """
 
 from __future__ import annotations
@@ -94,3 +95,95 @@ def score_candidates(
     likelihood = np.array(likes, dtype=float)
     probability = likelihood / likelihood.sum() if len(likelihood) else likelihood
     return Candidates(np.array(keep, dtype=int), np.array(dists), likelihood, probability, nearest)
+
+
+# ---------------------------------------------------------------------- joint (per frame)
+#
+# The per-point PDA above treats the points of one camera frame independently, so two
+# points can both pull on one landmark and every point near two landmarks spreads its
+# weight over both. The functions below associate a whole frame at once:
+#
+# 1. ``assign_frame``: a gated assignment (Hungarian on squared Mahalanobis distances, with
+#    a "no landmark" option of cost = the gate) so that two points of one frame never go
+#    to the same landmark (mutual exclusion; one landmark makes at most one point).
+# 2. ``exclusive_probabilities``: eqs. 4.23-4.24 evaluated only among the candidates that
+#    no *other* point of the frame took; the caller then skips a point whose assigned
+#    candidate does not clearly dominate (ambiguity -> no factor rather than spread weight).
+
+
+def innovation_covariance(
+    lever: np.ndarray,
+    pose_cov: np.ndarray,
+    landmark_cov: np.ndarray,
+    cross_cov: np.ndarray | None,
+    measurement_cov_world: np.ndarray,
+) -> np.ndarray:
+    """Covariance of d = T p - l for a landmark l and a pose T (right perturbation).
+
+    ``lever`` is d(T p)/d xi (3x6, :func:`pose_lever_jacobian`), ``cross_cov`` the 6x3
+    pose-landmark block of their joint marginal (None: neglected). With a re-observed
+    landmark the cross term cancels most of the shared drift: S is the uncertainty of the
+    landmark *relative to the robot*, not the sum of the two absolute uncertainties.
+    """
+    s = lever @ pose_cov @ lever.T + landmark_cov + measurement_cov_world
+    if cross_cov is not None:
+        lc = lever @ cross_cov
+        s = s - lc - lc.T
+    return 0.5 * (s + s.T)
+
+
+def mahalanobis_sq(innovation: np.ndarray, covariance: np.ndarray) -> float:
+    """d^T S^-1 d; inf if S is not positive definite."""
+    try:
+        chol = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        return math.inf
+    y = np.linalg.solve(chol, innovation)
+    return float(y @ y)
+
+
+def assign_frame(d2: np.ndarray, gate_sq: float) -> np.ndarray:
+    """Gated one-to-one assignment of the N points of a frame to M candidates.
+
+    ``d2`` (N, M) holds squared Mahalanobis distances (inf where not a candidate). Returns
+    (N,) column indices, -1 for "no landmark". Minimises the sum of d2 over assigned pairs
+    plus ``gate_sq`` per unassigned point, so no pair above the gate is ever used.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    n, m = d2.shape
+    out = np.full(n, -1, dtype=int)
+    if n == 0 or m == 0:
+        return out
+    big = 1e9
+    cost = np.full((n, m + n), big)
+    real = np.where(d2 <= gate_sq, d2, big)
+    cost[:, :m] = real
+    cost[np.arange(n), m + np.arange(n)] = gate_sq
+    rows, cols = linear_sum_assignment(cost)
+    for r, c in zip(rows, cols, strict=True):
+        if c < m and cost[r, c] < big:
+            out[r] = c
+    return out
+
+
+def exclusive_probabilities(
+    d2_row: np.ndarray,
+    log_norm_row: np.ndarray,
+    gate_sq: float,
+    taken_by_others: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 4.23-4.24 among one point's exclusive candidates.
+
+    ``log_norm_row`` holds log sqrt((2 pi)^3 |S|) per column. Returns the candidate
+    columns (gated, not assigned to another point of the frame) and their normalised
+    probabilities (computed in log space, so tiny densities do not underflow).
+    """
+    ok = np.isfinite(d2_row) & (d2_row <= gate_sq) & ~taken_by_others
+    cols = np.flatnonzero(ok)
+    if len(cols) == 0:
+        return cols, np.zeros(0)
+    log_like = -0.5 * d2_row[cols] - log_norm_row[cols]
+    log_like -= log_like.max()
+    p = np.exp(log_like)
+    return cols, p / p.sum()

@@ -32,9 +32,13 @@ from acslam.geometry import compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
 from acslam.slam import keys
 from acslam.slam.association import (
+    assign_frame,
     euclidean_gate,
+    exclusive_probabilities,
+    innovation_covariance,
+    mahalanobis_sq,
     measurement_covariance,
-    score_candidates,
+    pose_lever_jacobian,
 )
 from acslam.slam.factors import (
     observation_factor,
@@ -60,12 +64,15 @@ class SlamError(AcslamError):
 class AssociationResult:
     """What one observed point became: its most probable landmark and all probabilities.
 
-    ``landmark`` is -1 (and ``probabilities`` empty) for an ambiguous point that was dropped.
+    ``landmark`` is -1 (and ``probabilities`` empty) for a point that made no factor: an
+    ambiguous point that was dropped, or (``tentative`` True) an observation of a
+    tentative landmark not confirmed yet (its factor is added if it gets confirmed).
     """
 
     landmark: int
     is_new: bool
     probabilities: dict[int, float]
+    tentative: bool = False
 
 
 @dataclass
@@ -77,6 +84,21 @@ class _Robot:
     distance_m: float = 0.0
     angle_rad: float = 0.0
     last_stamp: dict[str, float] = field(default_factory=dict)
+    # Per keyframe index: cumulative odometry variance (xy, theta) and path length from
+    # the start, for the relative uncertainty between two keyframes of this robot.
+    cum_var_xy: list[float] = field(default_factory=lambda: [0.0])
+    cum_var_theta: list[float] = field(default_factory=lambda: [0.0])
+    cum_distance_m: list[float] = field(default_factory=lambda: [0.0])
+
+
+@dataclass
+class _Tentative:
+    """A landmark seen but not yet confirmed: its observations wait outside the graph."""
+
+    robot_id: int
+    observations: list[tuple[int, np.ndarray, np.ndarray]]  # (pose key, z_kf, cov_kf)
+    kf_index: int
+    stamp: float
 
 
 def _planar_covariance(pose6_cov: np.ndarray, yaw: float) -> np.ndarray:
@@ -113,6 +135,9 @@ class SlamBackend:
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
         self.update_durations_s: list[float] = []
         self.dropped_ambiguous = 0
+        self.tentative_observations = 0
+        self.expired_tentatives = 0
+        self._tentatives: list[_Tentative] = []
         for robot_id, start in starts.items():
             start = np.asarray(start, dtype=float)
             key = keys.pose_key(int(robot_id), 0)
@@ -158,6 +183,10 @@ class SlamBackend:
         self._graph.add(gtsam.BetweenFactorPose3(previous, key, relative, noise))
         self._initial.insert(key, self._pose_estimate(previous).compose(relative))
         self._odometry_variances[key] = np.asarray(noise.sigmas()) ** 2
+        sigmas = np.asarray(noise.sigmas())
+        robot.cum_var_xy.append(robot.cum_var_xy[-1] + sigmas[3] ** 2)
+        robot.cum_var_theta.append(robot.cum_var_theta[-1] + sigmas[2] ** 2)
+        robot.cum_distance_m.append(robot.cum_distance_m[-1] + robot.distance_m)
         robot.pose_keys.append(key)
         robot.stamps.append(stamp)
         robot.offset = np.zeros(3)
@@ -172,7 +201,7 @@ class SlamBackend:
     def add_landmarks(
         self, msg: LandmarkObservations, known_ids: list[int] | None = None
     ) -> list[AssociationResult]:
-        """Associate each point (PDA, or ``known_ids`` in reference runs) and add its factors.
+        """Associate the frame's points jointly (or use ``known_ids``) and add their factors.
 
         ``known_ids`` bypasses PDA with externally known identities; it exists only for the
         known-association reference evaluation and is never derived from the messages.
@@ -182,6 +211,28 @@ class SlamBackend:
             return []
         if known_ids is not None and len(known_ids) != len(msg.points):
             raise ValueError("known_ids needs one id per observed point")
+        points = np.asarray(msg.points, dtype=float).reshape(-1, 3)
+        finite = np.isfinite(points).all(axis=1)
+        if not finite.all():  # non-finite points are skipped (counted), the rest are used
+            self.skipped_messages["landmark_points"] = self.skipped_messages.get(
+                "landmark_points", 0
+            ) + int((~finite).sum())
+        results = [AssociationResult(-1, False, {}) for _ in points]
+        if not finite.any():
+            return results
+        frame = self._frame(robot, points[finite])
+        if known_ids is not None:
+            ids = [int(k) for k, ok in zip(known_ids, finite, strict=True) if ok]
+            used = self._add_known(frame, ids)
+        else:
+            used = self._associate_frame(robot, msg.stamp, frame)
+        for i, result in zip(np.flatnonzero(finite), used, strict=True):
+            results[i] = result
+        return results
+
+    def _frame(self, robot: _Robot, points: np.ndarray) -> dict:
+        """Per point: z in the latest keyframe (with its covariance), z in the world, and
+        the world covariance of T z from the sensor alone and with the pose marginal."""
         cfg = self.config
         pose_key = robot.pose_keys[-1]
         pose = self._pose_estimate(pose_key)
@@ -191,8 +242,15 @@ class SlamBackend:
         offset_cov = self._offset_covariance(robot)
         c, s = np.cos(offset[2]), np.sin(offset[2])
         offset_rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        results = []
-        for n, point in enumerate(msg.points):
+        frame: dict = {
+            "pose_key": pose_key,
+            "kf": [],
+            "cov_kf": [],
+            "world": [],
+            "sensor": [],
+            "cov": [],
+        }
+        for point in points:
             rotated = offset_rot @ point
             point_kf = rotated + np.array([offset[0], offset[1], 0.0])
             jac_offset = np.array(
@@ -200,60 +258,203 @@ class SlamBackend:
             )
             sensor_cov = sensor_covariance(cfg, point)
             cov_kf = offset_rot @ sensor_cov @ offset_rot.T + jac_offset @ offset_cov @ jac_offset.T
-            point_world = np.asarray(pose.transformFrom(point_kf))
-            point_cov = measurement_covariance(rotation, point_kf, cov_kf, pose_cov)
-            if known_ids is not None:
-                probabilities = self._known_association(int(known_ids[n]))
-            else:
-                probabilities = self._associate(point_world, point_cov)
-                if probabilities is None:
-                    self.dropped_ambiguous += 1
-                    results.append(AssociationResult(-1, False, {}))
-                    continue
-            is_new = not probabilities
+            frame["kf"].append(point_kf)
+            frame["cov_kf"].append(cov_kf)
+            frame["world"].append(np.asarray(pose.transformFrom(point_kf)))
+            frame["sensor"].append(rotation @ cov_kf @ rotation.T)
+            frame["cov"].append(measurement_covariance(rotation, point_kf, cov_kf, pose_cov))
+        return frame
+
+    def _add_factor(self, pose_key: int, index: int, point_kf, cov_kf, probability: float) -> None:
+        noise = observation_noise(cov_kf, probability, self.config.huber_k)
+        self._graph.add(observation_factor(pose_key, keys.landmark_key(index), point_kf, noise))
+
+    def _add_known(self, frame: dict, known_ids: list[int]) -> list[AssociationResult]:
+        results = []
+        for n, known in enumerate(known_ids):
+            index = self._known_landmarks.get(int(known))
+            is_new = index is None
             if is_new:
-                index = self._new_landmark(point_world, point_cov)
-                probabilities = {index: 1.0}
-                if known_ids is not None:
-                    self._known_landmarks[int(known_ids[n])] = index
-            for index, probability in probabilities.items():
-                noise = observation_noise(cov_kf, probability, cfg.huber_k)
-                self._graph.add(
-                    observation_factor(pose_key, keys.landmark_key(index), point_kf, noise)
-                )
-            best = max(probabilities, key=probabilities.__getitem__)
-            results.append(AssociationResult(best, is_new, probabilities))
+                index = self._new_landmark(frame["world"][n], frame["cov"][n])
+                self._known_landmarks[int(known)] = index
+            self._add_factor(frame["pose_key"], index, frame["kf"][n], frame["cov_kf"][n], 1.0)
+            results.append(AssociationResult(index, is_new, {index: 1.0}))
         return results
 
-    def _known_association(self, known_id: int) -> dict[int, float]:
-        index = self._known_landmarks.get(known_id)
-        return {} if index is None else {index: 1.0}
+    def _reference(self, robot: _Robot) -> tuple[int | None, gtsam.Pose3, np.ndarray]:
+        """The robot's latest *optimised* keyframe (None before the first update), its
+        pose, and its 6x6 covariance plus the odometry variances of the pending keyframes
+        after it (the pose whose cross-covariances with the landmarks iSAM2 can give)."""
+        pending = np.zeros(6)
+        for key in reversed(robot.pose_keys):
+            if self._estimate.exists(key):
+                return key, self._estimate.atPose3(key), self._marginal(key) + np.diag(pending)
+            pending = pending + self._odometry_variances.get(key, 0.0)
+        first = robot.pose_keys[0]
+        return None, self._pose_estimate(first), self._pose_covariance(robot)
 
-    def _associate(self, point_world: np.ndarray, point_cov: np.ndarray) -> dict[int, float] | None:
-        """PDA probabilities of the candidates; {} means a new landmark, None ambiguous."""
+    def _landmark_blocks(
+        self, ref_key: int | None, columns: list[int]
+    ) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
+        """Marginal covariance of each landmark column and its cross-covariance with the
+        reference pose (one iSAM2 joint marginal for the frame; None where unavailable)."""
+        lm_covs: list[np.ndarray] = []
+        cross: list[np.ndarray | None] = []
+        optimised = [
+            i
+            for i in columns
+            if i not in self._pending_landmark_covs and self._estimate.exists(keys.landmark_key(i))
+        ]
+        joint = None
+        if ref_key is not None and optimised:
+            query = [ref_key] + [keys.landmark_key(i) for i in optimised]
+            try:
+                joint = self._isam.jointMarginalCovariance(query)
+            except _GTSAM_ERRORS:
+                joint = None
+        for i in columns:
+            lkey = keys.landmark_key(i)
+            if joint is not None and i in optimised:
+                lm_covs.append(np.asarray(joint.at(lkey, lkey)))
+                cross.append(np.asarray(joint.at(ref_key, lkey)))
+            else:
+                lm_covs.append(self._landmark_covariance(i))
+                cross.append(None)
+        return lm_covs, cross
+
+    def _associate_frame(self, robot: _Robot, stamp: float, frame: dict) -> list[AssociationResult]:
+        """Joint association of one frame (see :mod:`acslam.slam.association`).
+
+        Columns are the confirmed landmarks within the Euclidean gate of some point and
+        this robot's live tentative landmarks. Innovation covariances use the pose-landmark
+        cross-covariance from iSAM2 for confirmed landmarks, and for a tentative one the
+        odometry chain between the keyframe it was last seen from and now.
+        """
         cfg = self.config
-        gated = euclidean_gate(point_world, self._landmark_positions, cfg.association_gate_m)
-        if len(gated) == 0:
-            return {}
-        covs = np.array([self._landmark_covariance(int(i)) for i in gated])
-        candidates = score_candidates(
-            point_world,
-            point_cov,
-            gated,
-            self._landmark_positions[gated],
-            covs,
-            cfg.association_mahalanobis_gate,
-            cfg.association_min_likelihood,
-        )
-        if (
-            len(candidates) == 0
-            and candidates.nearest_mahalanobis**2 < cfg.new_landmark_mahalanobis_gate
-        ):
-            return None
-        return {
-            int(i): float(p)
-            for i, p in zip(candidates.indices, candidates.probability, strict=True)
-        }
+        gate = cfg.association_mahalanobis_gate
+        self._expire_tentatives(robot.robot_id, stamp)
+        world = np.array(frame["world"])
+        n_points = len(world)
+        per_point = [
+            euclidean_gate(p, self._landmark_positions, cfg.association_gate_m) for p in world
+        ]
+        confirmed = sorted({int(i) for g in per_point for i in g})
+        tentatives = [t for t in self._tentatives if t.robot_id == robot.robot_id]
+        n_cols = len(confirmed) + len(tentatives)
+        d2 = np.full((n_points, n_cols), np.inf)
+        log_norm = np.zeros((n_points, n_cols))
+        if n_cols:
+            ref_key, ref_pose, ref_cov = self._reference(robot)
+            ref_rot = ref_pose.rotation().matrix()
+            lm_covs, cross = self._landmark_blocks(ref_key, confirmed)
+            col_of = {i: c for c, i in enumerate(confirmed)}
+            now_index = len(robot.pose_keys) - 1
+            tent_geometry = []
+            for t in tentatives:
+                key, z_kf, cov_kf = t.observations[-1]
+                pose = self._pose_estimate(key)
+                rot = pose.rotation().matrix()
+                tent_geometry.append((np.asarray(pose.transformFrom(z_kf)), rot @ cov_kf @ rot.T))
+            for n in range(n_points):
+                lever = pose_lever_jacobian(ref_rot, np.asarray(ref_pose.transformTo(world[n])))
+                for i in per_point[n]:
+                    c = col_of[int(i)]
+                    s = innovation_covariance(
+                        lever, ref_cov, lm_covs[c], cross[c], frame["sensor"][n]
+                    )
+                    self._score(d2, log_norm, n, c, world[n] - self._landmark_positions[i], s)
+                rho2 = float(frame["kf"][n][:2] @ frame["kf"][n][:2])
+                for k, t in enumerate(tentatives):
+                    position, cov = tent_geometry[k]
+                    innovation = world[n] - position
+                    if np.linalg.norm(innovation) > cfg.association_gate_m:
+                        continue
+                    var_xy = robot.cum_var_xy[now_index] - robot.cum_var_xy[t.kf_index]
+                    var_th = robot.cum_var_theta[now_index] - robot.cum_var_theta[t.kf_index]
+                    length = robot.cum_distance_m[now_index] - robot.cum_distance_m[t.kf_index]
+                    chain = var_xy + var_th * (length**2 + rho2)
+                    s = frame["sensor"][n] + cov + np.diag([chain, chain, 0.0])
+                    self._score(d2, log_norm, n, len(confirmed) + k, innovation, s)
+        assigned = assign_frame(d2, gate)
+        results: list[AssociationResult] = []
+        new_points: list[int] = []
+        for n in range(n_points):
+            others = np.zeros(n_cols, dtype=bool)
+            for m in range(n_points):
+                if m != n and assigned[m] >= 0:
+                    others[assigned[m]] = True
+            column = assigned[n]
+            if column < 0:
+                near = d2[n] < cfg.new_landmark_mahalanobis_gate
+                if (near & ~others).any():
+                    self.dropped_ambiguous += 1
+                    results.append(AssociationResult(-1, False, {}))
+                else:
+                    new_points.append(n)
+                    results.append(AssociationResult(-1, True, {}, tentative=True))
+                continue
+            cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, others)
+            best = float(probs[cols == column][0])
+            if best < cfg.association_min_best_probability:
+                self.dropped_ambiguous += 1
+                results.append(AssociationResult(-1, False, {}))
+                continue
+            if column >= len(confirmed):
+                results.append(
+                    self._observe_tentative(
+                        robot, stamp, tentatives[column - len(confirmed)], frame, n
+                    )
+                )
+                continue
+            soft = {
+                confirmed[c]: float(p)
+                for c, p in zip(cols, probs, strict=True)
+                if c < len(confirmed) and p >= cfg.association_min_probability
+            }
+            total = sum(soft.values())
+            soft = {i: p / total for i, p in soft.items()}
+            for index, probability in soft.items():
+                self._add_factor(
+                    frame["pose_key"], index, frame["kf"][n], frame["cov_kf"][n], probability
+                )
+            results.append(AssociationResult(confirmed[column], False, soft))
+        for n in new_points:
+            tentative = _Tentative(robot.robot_id, [], len(robot.pose_keys) - 1, stamp)
+            self._tentatives.append(tentative)
+            results[n] = self._observe_tentative(robot, stamp, tentative, frame, n)
+        return results
+
+    @staticmethod
+    def _score(d2, log_norm, n: int, c: int, innovation: np.ndarray, s: np.ndarray) -> None:
+        d2[n, c] = mahalanobis_sq(innovation, s)
+        if np.isfinite(d2[n, c]):
+            log_norm[n, c] = 0.5 * (3 * np.log(2 * np.pi) + np.linalg.slogdet(s)[1])
+
+    def _observe_tentative(
+        self, robot: _Robot, stamp: float, tentative: _Tentative, frame: dict, n: int
+    ) -> AssociationResult:
+        """Buffer an observation of a tentative landmark; confirm it once seen often enough."""
+        tentative.observations.append((frame["pose_key"], frame["kf"][n], frame["cov_kf"][n]))
+        tentative.kf_index = len(robot.pose_keys) - 1
+        tentative.stamp = stamp
+        if len(tentative.observations) < self.config.landmark_confirmations:
+            self.tentative_observations += 1
+            return AssociationResult(-1, True, {}, tentative=True)
+        self._tentatives.remove(tentative)
+        index = self._new_landmark(frame["world"][n], frame["cov"][n])
+        for pose_key, z_kf, cov_kf in tentative.observations:
+            self._add_factor(pose_key, index, z_kf, cov_kf, 1.0)
+        return AssociationResult(index, True, {index: 1.0})
+
+    def _expire_tentatives(self, robot_id: int, stamp: float) -> None:
+        timeout = self.config.tentative_timeout_s
+        keep = []
+        for t in self._tentatives:
+            if t.robot_id == robot_id and stamp - t.stamp > timeout:
+                self.expired_tentatives += 1
+            else:
+                keep.append(t)
+        self._tentatives = keep
 
     def _new_landmark(self, position: np.ndarray, covariance: np.ndarray) -> int:
         index = len(self._landmark_positions)
