@@ -43,6 +43,7 @@ from acslam.planning.fgp import FactorGraphPlanner
 from acslam.planning.field import DistanceField, RobotState
 from acslam.planning.recovery import Recovery
 from acslam.slam.backend import SlamBackend
+from acslam.slam.lidar_constraints import LidarConstraints
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,7 @@ class Server:
         self.map_spec = map_spec
         self.slam = SlamBackend(algorithms.slam, {i: np.asarray(s) for i, s in enumerate(starts)})
         self.team_map = TeamMap(map_spec, algorithms.mapping)
+        self.lidar = LidarConstraints(algorithms.scan_matching)
         self.frontiers = EwfdFrontierDetector(map_spec, active_radius_m(algorithms.mapping))
         self.tasks = [RobotTask(Recovery(algorithms.planning)) for _ in range(self.robot_count)]
         self.timer = CycleTimer()
@@ -158,7 +160,13 @@ class Server:
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[VelocityCommand]:
         with self.timer.measure("slam"):
             scans = self._ingest(messages)
-            self.slam.update()
+            for index, scan in scans:
+                mappable = self._mappable(scan, self.slam.scan_pose(index))
+                self.lidar.add_scan(self.slam, index, mappable)
+            closures = 0
+            if now_s >= self._next_map_update_s:
+                closures = self.lidar.close_loops(self.slam)
+            self.slam.update(extra_iterations=2 if closures else 0)
         with self.timer.measure("mapping"):
             self._integrate(scans)
         server = self.config.algorithms.server

@@ -237,3 +237,24 @@ def test_closely_spaced_landmarks_keep_their_identities() -> None:
     lms = backend.landmarks()
     nearest = np.linalg.norm(lms[:, None, :2] - truth_lms[None, :, :2], axis=2).argmin(axis=1)
     assert len(set(nearest.tolist())) >= 0.9 * len(truth_lms)  # twins stay two landmarks
+
+
+def test_scan_constraint_overrides_biased_odometry() -> None:
+    """Odometry says 1.0 m; a tight scan match between the keyframes' scans says 1.1 m
+    (with the second scan taken 0.05 m after its keyframe): the keyframe moves to 1.1."""
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    empty = LidarScan(0, 0.0, np.zeros(1), np.zeros(1), 8.0)
+    first = backend.add_scan(empty)
+    backend.add_odometry(OdometryIncrement(0, 1.0, 0.0, 1.0, 0.0, 0.0))
+    backend.add_odometry(OdometryIncrement(0, 1.1, 1.0, 0.05, 0.0, 0.0))
+    second = backend.add_scan(LidarScan(0, 1.1, np.zeros(1), np.zeros(1), 8.0))
+    assert backend.scan_keyframe(first) == (0, 0)
+    assert backend.scan_keyframe(second) == (0, 1)
+    backend.add_scan_constraint(
+        first, second, np.array([1.15, 0.0, 0.0]), np.diag([1e-6, 1e-6, 1e-6]), robust=False
+    )
+    backend.update(extra_iterations=2)
+    _, poses = backend.trajectory(0)
+    # kf_1 = scan_0 * 1.15 m * (0.05 m offset)^-1 = 1.10 m; odometry (1.0 m) is much looser.
+    assert poses[1, 0] == pytest.approx(1.1, abs=2e-3)
+    assert backend.scan_pose(second)[0] == pytest.approx(1.15, abs=2e-3)

@@ -28,7 +28,7 @@ import numpy as np
 
 from acslam.config import SlamConfig
 from acslam.errors import AcslamError
-from acslam.geometry import compose
+from acslam.geometry import between, compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
 from acslam.slam import keys
 from acslam.slam.association import (
@@ -54,6 +54,11 @@ from acslam.slam.factors import (
 
 _GTSAM_ERRORS = (RuntimeError, ValueError, IndexError, KeyError)
 _POSE_CHAR_CODE = ord(keys.POSE_CHAR)
+
+
+def inverse(pose: np.ndarray) -> np.ndarray:
+    """SE(2) inverse of ``[x, y, theta]``."""
+    return between(pose, np.zeros(3))
 
 
 class SlamError(AcslamError):
@@ -594,6 +599,44 @@ class SlamBackend:
         """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
         _, key, offset = self._scans[index]
         return compose(pose3_to_planar(self._pose_estimate(key)), offset)
+
+    def scan_keyframe(self, index: int) -> tuple[int, int]:
+        """``(robot_id, keyframe_index)`` stored scan ``index`` is attached to."""
+        return keys.decode_pose_key(self._scans[index][1])
+
+    def add_scan_constraint(
+        self,
+        index_a: int,
+        index_b: int,
+        relative: np.ndarray,
+        covariance: np.ndarray,
+        robust: bool,
+    ) -> None:
+        """A scan match as a factor between the two scans' keyframes.
+
+        ``relative`` is scan b's sensor pose in scan a's frame with its 3x3 covariance
+        ``[x, y, theta]``; with the scans' offsets from their keyframes it becomes
+        kf_a^-1 kf_b = off_a * relative * off_b^-1. The covariance is rotated by off_a's
+        heading (offsets are the odometry since the keyframe: small). ``robust`` adds a
+        Huber kernel (loop closures).
+        """
+        _, key_a, offset_a = self._scans[index_a]
+        _, key_b, offset_b = self._scans[index_b]
+        between_keyframes = compose(compose(offset_a, relative), inverse(offset_b))
+        c, s = np.cos(offset_a[2]), np.sin(offset_a[2])
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        planar = rotation @ np.asarray(covariance, dtype=float) @ rotation.T
+        full = np.diag(np.full(6, self.config.planar_sigma**2))
+        order = [3, 4, 2]  # GTSAM Pose3 tangent: rotation (roll, pitch, yaw), then x, y, z
+        full[np.ix_(order, order)] = planar
+        noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Covariance(full)
+        if robust:
+            noise = gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Huber.Create(self.config.huber_k), noise
+            )
+        self._graph.add(
+            gtsam.BetweenFactorPose3(key_a, key_b, planar_to_pose3(between_keyframes), noise)
+        )
 
     def scans_of_keyframes(self, keyframes: list[tuple[int, int]]) -> list[int]:
         """Indices of the scans attached to the ``(robot_id, index)`` keyframes."""
