@@ -9,25 +9,12 @@ Run: ``python benchmarks/mapping_speed.py``
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import numpy as np
 from scipy import ndimage
+from timing import median_ms
 
 from acslam.config import CostmapConfig, MappingConfig
 from acslam.mapping import LogOddsGrid, TeamMap, compute_costmap, grid_spec_for_bounds
-
-
-def median_ms(run: Callable[[], object], repeats: int) -> float:
-    """Median wall time of ``run`` in milliseconds, after one warm-up call (JIT)."""
-    run()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
 
 
 def room_ranges(pose: np.ndarray, angles: np.ndarray, half_size_m: float) -> np.ndarray:

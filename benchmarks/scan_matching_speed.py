@@ -10,11 +10,10 @@ Run: ``python benchmarks/scan_matching_speed.py``
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
+from timing import median_ms
 
 from acslam.config import LidarConfig, ScanMatchingConfig
 from acslam.geometry import between, compose
@@ -22,17 +21,6 @@ from acslam.grid import GridSpec
 from acslam.mapping.scan_matching import match_scans, prepare_scan
 from acslam.sim.lidar import LidarSensor
 from acslam.worlds.world import World
-
-
-def median_ms(run: Callable[[], object], repeats: int) -> float:
-    """Median wall time of ``run`` in milliseconds, after one warm-up call (JIT)."""
-    run()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return 1e3 * float(np.median(times))
 
 
 def room_world() -> World:
