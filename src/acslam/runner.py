@@ -100,7 +100,7 @@ def run_exploration(
     wall_time_s = time.perf_counter() - started
     record = _record(scenario, server, sim, explored_history)
     metrics = _metrics(scenario, server, sim, record, reason, wall_time_s)
-    _write_outputs(out_dir, scenario, server, sim, record)
+    _write_outputs(out_dir, scenario, record)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
     write_report(out_dir, record, metrics)
     return metrics
@@ -201,9 +201,7 @@ def _metrics(
     }
 
 
-def _write_outputs(
-    out_dir: Path, scenario: Scenario, server: Server, sim: Simulator, record: RunRecord
-) -> None:
+def _write_outputs(out_dir: Path, scenario: Scenario, record: RunRecord) -> None:
     save_map(out_dir / "map", record.estimated_values, scenario.world.spec)
     for i in range(scenario.robot_count):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]

@@ -159,10 +159,12 @@ class Server:
 
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[VelocityCommand]:
         with self.timer.measure("slam"):
-            scans = self._ingest(messages)
+            scans = [
+                (index, self._mappable(scan, self.slam.scan_pose(index)))
+                for index, scan in self._ingest(messages)
+            ]
             for index, scan in scans:
-                mappable = self._mappable(scan, self.slam.scan_pose(index))
-                self.lidar.add_scan(self.slam, index, mappable)
+                self.lidar.add_scan(self.slam, index, scan)
             closures = 0
             if now_s >= self._next_map_update_s:
                 closures = self.lidar.close_loops(self.slam)
@@ -230,11 +232,11 @@ class Server:
         )
 
     def _integrate(self, scans: list[tuple[int, LidarScan]]) -> None:
-        """Add new scans at their keyframe-relative pose; move scans SLAM corrected."""
+        """Add new (mappable) scans at their keyframe-relative pose; move scans SLAM
+        corrected."""
         for index, scan in scans:
             pose = self.slam.scan_pose(index)
-            kept = self._mappable(scan, pose)
-            self.team_map.add_scan(scan.robot_id, index, kept.ranges, kept.angles, pose)
+            self.team_map.add_scan(scan.robot_id, index, scan.ranges, scan.angles, pose)
             self._new_scan_cells.append(self.map_spec.world_to_cell(pose[:2])[0])
         moved = self.slam.moved_keyframes()
         if moved:
