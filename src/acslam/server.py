@@ -284,12 +284,13 @@ class Server:
             return
         robot_cells = window.spec.world_to_cell(poses[:, :2])
         robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
+        current = [self._matching_cluster(task) for task in self.tasks]
         allocation = allocate(
             robot_cells,
             self._clusters,
             costmap,
             self.config.algorithms.allocation,
-            [self._matching_cluster(task) for task in self.tasks],
+            current,
         )
         planning = self.config.algorithms.planning
         for i, task in enumerate(self.tasks):
@@ -317,6 +318,9 @@ class Server:
                 continue
             task.cluster = self._clusters[choice]
             task.path_m = np.vstack([poses[i, :2], path.points_m])
+            task.recovery.replanned(
+                now_s, choice != current[i], remaining_length_m(task.path_m, poses[i, :2])
+            )
             task.idle_since_s = None
         # Done once every robot has had nothing to do for a while after the map has begun:
         # frontiers briefly vanish while a robot stands on the last one it was sent to.

@@ -64,3 +64,15 @@ def test_penalty_raises_cost_near_traps_only_and_keeps_lethal() -> None:
     assert np.isinf(penalised[0, 0]) and (penalised[~near & np.isfinite(cost)] == 0.0).all()
     recovery.reset(0.0)
     assert recovery.traps_xy_m == [] and recovery.count == 0
+
+
+def test_a_new_goal_forgets_traps_and_the_same_goal_keeps_them() -> None:
+    recovery = Recovery(PlanningConfig())
+    timeout = PlanningConfig().stuck_timeout_s
+    recovery.step(0.0, RobotState(1.0, 1.0, 0.0, 0.0, 0.0), 2.0)
+    step = recovery.step(timeout, RobotState(1.0, 1.0, 0.0, 0.0, 0.0), 2.0)
+    assert step.event is not None and len(recovery.traps_xy_m) == 1
+    recovery.replanned(timeout + 1.0, new_goal=False, distance_to_goal_m=3.0)
+    assert len(recovery.traps_xy_m) == 1 and recovery.active
+    recovery.replanned(timeout + 2.0, new_goal=True, distance_to_goal_m=3.0)
+    assert recovery.traps_xy_m == [] and not recovery.active and recovery.count == 1

@@ -30,3 +30,21 @@ def test_reset_restarts_the_clock_but_keeps_the_count() -> None:
     assert detector.update(21.9, 7.0) is None
     event = detector.update(22.0, 7.0)
     assert event is not None and event.count == 2
+
+
+def test_rebase_accepts_a_longer_replanned_path_without_resetting_the_clock() -> None:
+    detector = StuckDetector(timeout_s=10.0, min_progress_m=0.1)
+    detector.update(0.0, 0.4)  # a first, short path
+    detector.rebase(3.8)  # replanned to the same goal around an obstacle: longer
+    events = [detector.update(t, 3.8 - 0.2 * t) for t in range(1, 15)]
+    assert events == [None] * 14  # driving the longer path is progress
+
+
+def test_rebase_keeps_a_trapped_robot_caught() -> None:
+    detector = StuckDetector(timeout_s=10.0, min_progress_m=0.1)
+    detector.update(0.0, 5.0)
+    fired = []
+    for t in range(1, 11):
+        detector.rebase(5.0 + 0.3 * (t % 2))  # replanned every second, path length jitters
+        fired.append(detector.update(float(t), 5.0 + 0.3 * (t % 2)))
+    assert [e.stamp_s for e in fired if e is not None] == [10.0]

@@ -13,6 +13,9 @@ import numpy as np
 
 from acslam.grid import GridSpec
 
+NO_OBSTACLE_M = 1.0e3
+"""Clearance used where the distance transform found no obstacle at all."""
+
 
 @dataclass(frozen=True)
 class RobotState:
@@ -39,7 +42,9 @@ class DistanceField:
     def __init__(self, distance_m: np.ndarray, grid: GridSpec) -> None:
         if distance_m.shape != grid.shape:
             raise ValueError(f"distance field {distance_m.shape} does not match grid {grid.shape}")
-        self.distance_m = np.asarray(distance_m, dtype=float)
+        # No obstacle in the window makes the transform infinite; a finite cap keeps the
+        # gradient 0 there instead of inf - inf = NaN, and is as good as infinite clearance.
+        self.distance_m = np.minimum(np.asarray(distance_m, dtype=float), NO_OBSTACLE_M)
         self.grid = grid
 
     def _corners(self, xy_m: np.ndarray) -> tuple[np.ndarray, ...]:

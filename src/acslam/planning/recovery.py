@@ -71,6 +71,14 @@ class Recovery:
         self.traps_xy_m.clear()
         self._back_off_from = None
 
+    def replanned(self, stamp_s: float, new_goal: bool, distance_to_goal_m: float) -> None:
+        """A new global path: to a new goal starts afresh (traps forgotten); to the same
+        goal keeps the traps and the stuck timer (:meth:`StuckDetector.rebase`)."""
+        if new_goal:
+            self.reset(stamp_s)
+        else:
+            self.detector.rebase(distance_to_goal_m)
+
     def step(self, stamp_s: float, state: RobotState, distance_to_goal_m: float) -> RecoveryStep:
         """Feed one control period's estimated state and its distance to the goal.
 

@@ -37,6 +37,13 @@ class StuckDetector:
         self._best_m = None
         self._since_s = stamp_s
 
+    def rebase(self, distance_to_goal_m: float) -> None:
+        """The path to the same goal was replanned and may be longer: progress counts from
+        its distance now, while the time since the last real progress keeps running, so a
+        robot replanned over and over in a trap (path lengths jittering) is still caught."""
+        if self._best_m is not None:
+            self._best_m = distance_to_goal_m
+
     def update(self, stamp_s: float, distance_to_goal_m: float) -> StuckEvent | None:
         """Feed one measurement; returns a :class:`StuckEvent` when the robot is stuck."""
         if self._best_m is None or distance_to_goal_m <= self._best_m - self.min_progress_m:
