@@ -233,8 +233,10 @@ class SlamConfig(Section):
     poses near zero (the robots are planar). ``huber_k`` is the Huber threshold on the
     whitened (Mahalanobis) residual norm of an observation factor; 2.8 is the 95 %
     quantile of a 3-dof chi distribution, so inliers keep their full Gaussian weight.
-    The association gates: Euclidean gate (m), then the squared Mahalanobis gate
-    (11.34 = chi-square 3 dof, 99 %), then a likelihood floor (a density, 1/m^3). A point
+    The association gates: a Euclidean pre-gate (``association_gate_m``, widened for a
+    point whose own covariance, pose marginal included, reaches further, so a robot that
+    drifted can still find its landmarks), then the squared Mahalanobis gate (11.34 =
+    chi-square 3 dof, 99 %), then a likelihood floor (a density, 1/m^3). A point
     with no candidate starts a new landmark only if every landmark is further than
     ``new_landmark_mahalanobis_gate`` (squared; 25 ~ 5 sigma): in between it is ambiguous
     and dropped, otherwise the 1 % of true re-observations outside the 99 % gate would
@@ -245,6 +247,14 @@ class SlamConfig(Section):
     probability >= ``association_min_probability``. A new landmark is first tentative: it
     enters the graph once seen in ``landmark_confirmations`` frames by the same robot, the
     last within ``tentative_timeout_s`` of the previous; otherwise it is forgotten.
+    iSAM2 checks for relinearization every
+    ``isam_relinearize_skip`` updates, of variables whose update exceeds
+    ``isam_relinearize_threshold`` (GTSAM's defaults are 10 and 0.1; relinearizing every
+    update at 0.01 cost 5-10x the update time for no measurable accuracy).
+    ``isam_factorization``: Cholesky is iSAM2's fast default; QR is slower but does not
+    square the condition number, which long laser-only graphs (millimetre scan-match
+    sigmas beside metres of drift, e.g. the fr079 log) need to avoid an "indeterminate
+    linear system".
     """
 
     prior_sigma_xy_m: PositiveFloat = 0.01
@@ -269,7 +279,9 @@ class SlamConfig(Section):
     association_min_probability: Probability = 0.05
     landmark_confirmations: Annotated[int, Field(ge=1)] = 3
     tentative_timeout_s: PositiveFloat = 10.0
-    isam_relinearize_threshold: PositiveFloat = 0.01
+    isam_relinearize_threshold: PositiveFloat = 0.05
+    isam_relinearize_skip: Annotated[int, Field(ge=1)] = 10
+    isam_factorization: Literal["CHOLESKY", "QR"] = "CHOLESKY"
     correction_threshold_m: PositiveFloat = 0.05
 
 

@@ -13,7 +13,9 @@ Files (see the dataset's PROVENANCE.md): ``RobotN_Odometry.dat`` (t, v, w),
   (subjects 1-5) are kept apart in :attr:`MrclamData.robot_measurements`.
 
 Bad input, decided per field: a line with the wrong number of columns, a non-number or a
-non-finite value is a :class:`DataError` naming the file and line (the file is corrupt).
+non-finite value is a :class:`DataError` naming the file and line (the file is corrupt),
+and so is a missing file, or a robot with fewer than two odometry records or no ground
+truth (nothing to run it on).
 Values that are well-formed but unusable are skipped and counted in
 :attr:`MrclamData.skipped`: a barcode not in ``Barcodes.dat`` (the dataset's known
 spurious readings), a non-positive range, and an odometry/ground-truth sample whose time
@@ -105,14 +107,20 @@ def read_mrclam(folder: str | Path, max_time_s: float | None = None) -> MrclamDa
 
     odometry, measurements, groundtruth = {}, {}, {}
     for robot in ROBOT_IDS:
-        odometry[robot], dropped = _advancing(read_table(folder / f"Robot{robot}_Odometry.dat", 3))
+        odometry_path = folder / f"Robot{robot}_Odometry.dat"
+        odometry[robot], dropped = _advancing(read_table(odometry_path, 3))
+        if len(odometry[robot]) < 2:
+            raise DataError(odometry_path, "fewer than two odometry records: robot cannot move")
         skipped["time_not_advancing"] += dropped
-        gt, dropped = _advancing(read_table(folder / f"Robot{robot}_Groundtruth.dat", 4))
+        gt_path = folder / f"Robot{robot}_Groundtruth.dat"
+        gt, dropped = _advancing(read_table(gt_path, 4))
+        if len(gt) == 0:
+            raise DataError(gt_path, "no ground-truth records: the start pose is unknown")
         skipped["time_not_advancing"] += dropped
         groundtruth[robot] = (gt[:, 0], np.column_stack([gt[:, 1:3], np.unwrap(gt[:, 3])]))
         measurements[robot] = read_table(folder / f"Robot{robot}_Measurement.dat", 4)
 
-    t0 = min(table[0, 0] for table in odometry.values() if len(table))
+    t0 = min(table[0, 0] for table in odometry.values())
     t_end = math.inf if max_time_s is None else t0 + max_time_s
 
     events: list[tuple[float, int, int, object]] = []  # (stamp, order, robot, payload)

@@ -123,7 +123,8 @@ class SlamBackend:
         self.config = config
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(config.isam_relinearize_threshold)
-        params.relinearizeSkip = 1
+        params.relinearizeSkip = config.isam_relinearize_skip
+        params.setFactorization(config.isam_factorization)
         self._isam = gtsam.ISAM2(params)
         self._graph = gtsam.NonlinearFactorGraph()
         self._initial = gtsam.Values()
@@ -330,7 +331,7 @@ class SlamBackend:
     def _associate_frame(self, robot: _Robot, stamp: float, frame: dict) -> list[AssociationResult]:
         """Joint association of one frame (see :mod:`acslam.slam.association`).
 
-        Columns are the confirmed landmarks within the Euclidean gate of some point and
+        Columns are the confirmed landmarks within the Euclidean pre-gate of some point and
         this robot's live tentative landmarks. Innovation covariances use the pose-landmark
         cross-covariance from iSAM2 for confirmed landmarks, and for a tentative one the
         odometry chain between the keyframe it was last seen from and now.
@@ -341,7 +342,8 @@ class SlamBackend:
         world = np.array(frame["world"])
         n_points = len(world)
         per_point = [
-            euclidean_gate(p, self._landmark_positions, cfg.association_gate_m) for p in world
+            euclidean_gate(p, self._landmark_positions, self._gate_radius(cov))
+            for p, cov in zip(world, frame["cov"], strict=True)
         ]
         confirmed = sorted({int(i) for g in per_point for i in g})
         tentatives = [t for t in self._tentatives if t.robot_id == robot.robot_id]
@@ -374,10 +376,7 @@ class SlamBackend:
                     innovation = world[n] - position
                     if np.linalg.norm(innovation) > cfg.association_gate_m:
                         continue
-                    var_xy = robot.cum_var_xy[now_index] - robot.cum_var_xy[t.kf_index]
-                    var_th = robot.cum_var_theta[now_index] - robot.cum_var_theta[t.kf_index]
-                    length = robot.cum_distance_m[now_index] - robot.cum_distance_m[t.kf_index]
-                    chain = var_xy + var_th * (length**2 + rho2)
+                    chain = self._chain_variance(robot, t.kf_index, now_index, rho2)
                     s = frame["sensor"][n] + cov + np.diag([chain, chain, 0.0])
                     self._score(d2, log_norm, n, len(confirmed) + k, innovation, s)
         assigned = assign_frame(d2, gate)
@@ -398,7 +397,18 @@ class SlamBackend:
                     new_points.append(n)
                     results.append(AssociationResult(-1, True, {}, tentative=True))
                 continue
-            cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, others)
+            # A confirmed landmark in the gate takes precedence over this robot's tentatives:
+            # a tentative that competes with one is most likely its duplicate (seen by this
+            # robot before another robot's observations confirmed it), and letting the two
+            # split the probability would drop every point until the tentative expires.
+            excluded = others.copy()
+            n_conf = len(confirmed)
+            row = np.where(others[:n_conf], np.inf, d2[n, :n_conf])
+            if column >= n_conf and n_conf and row.min() <= gate:
+                column = int(np.argmin(row))
+            if column < n_conf:
+                excluded[n_conf:] = True
+            cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, excluded)
             best = float(probs[cols == column][0])
             if best < cfg.association_min_best_probability:
                 self.dropped_ambiguous += 1
@@ -429,6 +439,16 @@ class SlamBackend:
             results[n] = self._observe_tentative(robot, stamp, tentative, frame, n)
         return results
 
+    def _gate_radius(self, point_cov: np.ndarray) -> float:
+        """Euclidean pre-gate of a point: ``association_gate_m``, widened to the Mahalanobis
+        gate of the point's own world covariance (pose marginal included) so that a robot
+        whose estimate drifted further than the fixed gate can still find its landmarks."""
+        widest = float(np.linalg.eigvalsh(point_cov)[-1])
+        return max(
+            self.config.association_gate_m,
+            float(np.sqrt(self.config.association_mahalanobis_gate * widest)),
+        )
+
     @staticmethod
     def _score(d2, log_norm, n: int, c: int, innovation: np.ndarray, s: np.ndarray) -> None:
         d2[n, c] = mahalanobis_sq(innovation, s)
@@ -450,6 +470,14 @@ class SlamBackend:
         for pose_key, z_kf, cov_kf in tentative.observations:
             self._add_factor(pose_key, index, z_kf, cov_kf, 1.0)
         return AssociationResult(index, True, {index: 1.0})
+
+    def _chain_variance(self, robot: _Robot, since: int, now: int, lever_sq: float) -> float:
+        """Planar position variance the odometry chain from keyframe ``since`` to ``now``
+        adds to a point seen at squared range ``lever_sq`` (heading error x lever arm)."""
+        var_xy = robot.cum_var_xy[now] - robot.cum_var_xy[since]
+        var_th = robot.cum_var_theta[now] - robot.cum_var_theta[since]
+        length = robot.cum_distance_m[now] - robot.cum_distance_m[since]
+        return var_xy + var_th * (length**2 + lever_sq)
 
     def _expire_tentatives(self, robot_id: int, stamp: float) -> None:
         timeout = self.config.tentative_timeout_s
