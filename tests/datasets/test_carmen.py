@@ -71,6 +71,12 @@ def test_garbled_lines_are_skipped_counted_and_named(tmp_path: Path) -> None:
         (type(log.odometry[0]), 3),
     ]
     assert log.scans[0].laser_pose_xytheta.tolist() == [1.0, 2.0, 0.5]
+    # The ipc (first trailing) stamp is kept beside the logger stamp the records sort by.
+    assert [(r.ipc_stamp_s, r.stamp_s) for r in log.records] == [
+        (100.0, 0.1),
+        (100.0, 0.2),
+        (100.0, 0.5),
+    ]
 
 
 def test_unreadable_files_raise_data_error(tmp_path: Path) -> None:

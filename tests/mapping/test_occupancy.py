@@ -33,8 +33,9 @@ def test_single_beam_updates_bresenham_cells_with_analytic_values() -> None:
         hit_radius_m=0.1,
     )
     grid = LogOddsGrid(GridSpec(0.0, 0.0, 0.1, 10, 20), cfg)
-    # Sensor at the centre of cell (5, 2); a 1 m beam along +x ends in cell (5, 12).
-    got = _increments_by_cell(grid, [1.0], [0.0], [0.25, 0.55, 0.0])
+    # Sensor at the centre of cell (5, 2); a 0.98 m beam along +x ends at x = 1.23 m, and
+    # HIT_DEPTH_CELLS (half a cell) deeper still in cell (5, 12).
+    got = _increments_by_cell(grid, [0.98], [0.0], [0.25, 0.55, 0.0])
 
     def falloff(d: float) -> float:
         return 1.0 - 0.05 * d
@@ -189,6 +190,7 @@ def test_grid_for_bounds_covers_the_rectangle() -> None:
 def test_invalid_zero_readings_change_nothing() -> None:
     spec = GridSpec(0.0, 0.0, 0.05, 80, 80)
     grid = LogOddsGrid(spec, MappingConfig())
-    grid.integrate(np.zeros(8), np.linspace(-np.pi, np.pi, 8, endpoint=False),
-                   np.array([2.0, 2.0, 0.0]))
+    grid.integrate(
+        np.zeros(8), np.linspace(-np.pi, np.pi, 8, endpoint=False), np.array([2.0, 2.0, 0.0])
+    )
     assert not grid.known_mask().any()

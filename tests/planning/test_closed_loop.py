@@ -1,4 +1,4 @@
-"""Closed-loop acceptance in the simulator (issue 6): true map and true poses, no SLAM.
+"""Closed-loop acceptance in the simulator: true map and true poses, no SLAM.
 
 Each control period (0.1 s = 5 simulator steps) :func:`drive` takes every robot's true
 pose, replans A* on the true costmap every ``replan_period_s``, takes the lookahead

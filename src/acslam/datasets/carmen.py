@@ -40,19 +40,26 @@ class CarmenWarning(UserWarning):
 
 @dataclass(frozen=True)
 class OdometryRecord:
-    """Raw wheel odometry pose (odometry frame) and velocities; ``line`` is 1-based."""
+    """Raw wheel odometry pose (odometry frame) and velocities; ``line`` is 1-based.
+
+    ``stamp_s`` is the logger timestamp (the order records are replayed in),
+    ``ipc_stamp_s`` the message's own (first trailing) timestamp, by which evaluation
+    tools and reference relations name a message.
+    """
 
     stamp_s: float
     pose_xytheta: np.ndarray
     velocity_mps: float
     yaw_rate_radps: float
     line: int
+    ipc_stamp_s: float
 
 
 @dataclass(frozen=True)
 class LaserRecord:
     """One front-laser sweep: ranges (m, ``inf`` = no return) at ``angles_rad`` in the
-    laser frame, the laser pose and the robot odometry pose (odometry frame)."""
+    laser frame, the laser pose and the robot odometry pose (odometry frame). Stamps as
+    in :class:`OdometryRecord`."""
 
     stamp_s: float
     angles_rad: np.ndarray
@@ -60,6 +67,7 @@ class LaserRecord:
     laser_pose_xytheta: np.ndarray
     odom_pose_xytheta: np.ndarray
     line: int
+    ipc_stamp_s: float
 
 
 @dataclass
@@ -89,8 +97,8 @@ def _floats(tokens: list[str]) -> np.ndarray:
 def _parse_odom(tokens: list[str], line: int) -> OdometryRecord:
     if len(tokens) != _ODOM_FIELDS:
         raise ValueError(f"expected {_ODOM_FIELDS} fields, got {len(tokens)}")
-    values = _floats(tokens[1:7] + tokens[9:10])
-    return OdometryRecord(values[6], values[0:3], values[3], values[4], line)
+    values = _floats(tokens[1:8] + tokens[9:10])
+    return OdometryRecord(values[7], values[0:3], values[3], values[4], line, values[6])
 
 
 def _parse_flaser(tokens: list[str], line: int, fov_rad: float) -> LaserRecord:
@@ -103,10 +111,10 @@ def _parse_flaser(tokens: list[str], line: int, fov_rad: float) -> LaserRecord:
     if (ranges < 0).any():
         raise ValueError("negative range")
     poses = _floats(tokens[2 + n : 8 + n])
-    stamp = _floats(tokens[10 + n : 11 + n])[0]
+    ipc_stamp, stamp = _floats([tokens[8 + n], tokens[10 + n]])
     ranges[ranges >= NO_RETURN_RANGE_M] = np.inf
     angles = np.linspace(-fov_rad / 2, fov_rad / 2, n) if n > 1 else np.zeros(1)
-    return LaserRecord(stamp, angles, ranges, poses[0:3], poses[3:6], line)
+    return LaserRecord(stamp, angles, ranges, poses[0:3], poses[3:6], line, ipc_stamp)
 
 
 def _open_text(path: Path) -> list[str]:

@@ -422,14 +422,24 @@ def match_scans(
 
 
 def verify(
-    result: ScanMatchResult, initial_guess: np.ndarray, config: ScanMatchingConfig
+    result: ScanMatchResult,
+    initial_guess: np.ndarray,
+    config: ScanMatchingConfig,
+    strict: bool = True,
+    max_correction_m: float | None = None,
 ) -> Verification:
     """Accept a match only if it converged, enough of B fits A closely, the correction
-    from the initial guess is plausible and the covariance is small and well conditioned.
+    from the initial guess is plausible and (``strict``) the covariance is small and well
+    conditioned.
 
     A wrong loop closure corrupts the whole graph, while a rejected one only loses some
-    information, so every test must pass.
+    information, so every test must pass. ``strict=False`` is for sequential matches: a
+    corridor leaves the axis unconstrained, which the covariance says (the graph then
+    takes that direction from odometry); rejecting it would drop the heading and the
+    cross-axis position, which the corridor constrains best. ``max_correction_m``
+    overrides ``config.max_correction_m`` (a loop after a long way may have drifted more).
     """
+    limit_m = config.max_correction_m if max_correction_m is None else max_correction_m
     reasons: list[str] = []
     if not result.converged:
         reasons.append("did not converge")
@@ -438,10 +448,12 @@ def verify(
     if not result.rms_residual_m <= config.max_rms_m:
         reasons.append(f"RMS residual {result.rms_residual_m:.3f} m > {config.max_rms_m} m")
     correction = between(np.asarray(initial_guess, dtype=float), result.relative)
-    if math.hypot(correction[0], correction[1]) > config.max_correction_m:
-        reasons.append(f"translation correction > {config.max_correction_m} m")
+    if math.hypot(correction[0], correction[1]) > limit_m:
+        reasons.append(f"translation correction > {limit_m:.2f} m")
     if abs(correction[2]) > config.max_correction_rad:
         reasons.append(f"rotation correction > {config.max_correction_rad} rad")
+    if not strict:
+        return Verification(not reasons, tuple(reasons))
     xy_eigen = np.linalg.eigvalsh(result.covariance[:2, :2])
     if math.sqrt(xy_eigen[-1]) > config.max_sigma_m:
         reasons.append(f"translation sigma {math.sqrt(xy_eigen[-1]):.3f} m > {config.max_sigma_m}")

@@ -13,8 +13,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between
+from acslam.geometry import between, transform_points
 from acslam.mapping.scan_matching import (
     Keyframe,
     PreparedScan,
@@ -26,6 +28,16 @@ from acslam.mapping.scan_matching import (
 from acslam.messages import LidarScan
 from acslam.slam.backend import SlamBackend
 
+MAX_LOOP_ATTEMPTS = 3
+"""Loop-closure matches tried per keyframe (as the later keyframe of a pair)."""
+
+
+LOOP_DRIFT_PER_M = 0.05
+"""A loop closure may correct the estimate by this much per metre travelled between its
+keyframes (each robot's since its known start, for two robots), if more than the config's
+``max_correction_m``: laser odometry drifts ~1-3 % of the way, so a fixed bound rejects
+exactly the long loops that matter most. The other checks of :func:`verify` still apply."""
+
 
 @dataclass(frozen=True)
 class _KeyframeScan:
@@ -33,19 +45,28 @@ class _KeyframeScan:
     robot_id: int
     stamp_s: float
     scan: PreparedScan
+    path_m: float  # the robot's path length from its start to this keyframe (estimated)
 
 
 class LidarConstraints:
     """Adds verified scan-matching factors to a :class:`SlamBackend`."""
 
-    def __init__(self, config: ScanMatchingConfig) -> None:
+    def __init__(self, config: ScanMatchingConfig, submap_keyframes: int = 1) -> None:
+        """``submap_keyframes`` > 1 matches each keyframe to the merged scans of that many
+        previous keyframes of its robot (placed by their current estimates) instead of
+        the last one alone: more of the scene per match, so less drift per step."""
+        if submap_keyframes < 1:
+            raise ValueError("submap_keyframes must be >= 1")
         self.config = config
+        self.submap_keyframes = submap_keyframes
         self._entries: list[_KeyframeScan] = []
         self._by_keyframe: dict[tuple[int, int], int] = {}
         self._tried: set[tuple[int, int]] = set()
+        self._attempts: dict[int, int] = {}
         self.sequential_added = 0
+        self.sequential_rejected = 0
         self.loops_added = 0
-        self.rejected = 0
+        self.loops_rejected = 0
 
     def add_scan(self, slam: SlamBackend, scan_index: int, scan: LidarScan) -> None:
         """Keep the first scan of each keyframe and match it to the previous keyframe's."""
@@ -53,38 +74,89 @@ class LidarConstraints:
         if (robot_id, keyframe) in self._by_keyframe:
             return
         prepared = prepare_scan(scan.angles, scan.ranges, self.config)
-        self._by_keyframe[(robot_id, keyframe)] = len(self._entries)
-        self._entries.append(_KeyframeScan(scan_index, robot_id, scan.stamp, prepared))
         previous = self._by_keyframe.get((robot_id, keyframe - 1))
-        if previous is not None and self._constrain(
-            slam, self._entries[previous], self._entries[-1], robust=False
-        ):
+        path_m = 0.0
+        if previous is not None:
+            before = self._entries[previous]
+            step = between(slam.scan_pose(before.scan_index), slam.scan_pose(scan_index))
+            path_m = before.path_m + float(np.hypot(step[0], step[1]))
+        self._by_keyframe[(robot_id, keyframe)] = len(self._entries)
+        self._entries.append(_KeyframeScan(scan_index, robot_id, scan.stamp, prepared, path_m))
+        if previous is None:
+            return
+        reference = self._submap(slam, robot_id, keyframe - 1)
+        if self._constrain(slam, self._entries[previous], self._entries[-1], False, reference):
             self.sequential_added += 1
+        else:
+            self.sequential_rejected += 1
 
     def close_loops(self, slam: SlamBackend) -> int:
-        """Match every not yet tried pair of keyframes close in space; returns how many
-        closures were added."""
+        """Match not yet tried pairs of keyframes close in space, nearest first and at most
+        ``MAX_LOOP_ATTEMPTS`` per keyframe; returns how many closures were added.
+
+        The cap is ours: a robot that passes a place many times (or turns on the spot)
+        has dozens of candidates per keyframe, and matching them all costs far more than
+        the few closures each keyframe needs.
+        """
         keyframes = [
             Keyframe(k, e.robot_id, e.stamp_s, slam.scan_pose(e.scan_index), e.scan)
             for k, e in enumerate(self._entries)
         ]
+        pairs = [p for p in loop_closure_candidates(keyframes, self.config) if p not in self._tried]
+        gaps = [float(np.hypot(*(keyframes[i].pose[:2] - keyframes[j].pose[:2]))) for i, j in pairs]
         added = 0
-        for pair in loop_closure_candidates(keyframes, self.config):
-            if pair in self._tried:
+        for _, pair in sorted(zip(gaps, pairs, strict=True)):
+            if self._attempts.get(pair[1], 0) >= MAX_LOOP_ATTEMPTS:
                 continue
+            self._attempts[pair[1]] = self._attempts.get(pair[1], 0) + 1
             self._tried.add(pair)
             if self._constrain(slam, self._entries[pair[0]], self._entries[pair[1]], robust=True):
                 added += 1
+            else:
+                self.loops_rejected += 1
         self.loops_added += added
         return added
 
+    def _submap(self, slam: SlamBackend, robot_id: int, last: int) -> PreparedScan:
+        """Scans of keyframes ``last - submap_keyframes + 1 .. last`` of one robot, in the
+        sensor frame of ``last`` (just ``last``'s scan when the submap is one keyframe)."""
+        base = self._entries[self._by_keyframe[(robot_id, last)]]
+        if self.submap_keyframes == 1:
+            return base.scan
+        base_pose = slam.scan_pose(base.scan_index)
+        clouds = []
+        for keyframe in range(last, max(last - self.submap_keyframes, -1), -1):
+            entry = self._by_keyframe.get((robot_id, keyframe))
+            if entry is None:
+                continue
+            scan = self._entries[entry]
+            relative = between(base_pose, slam.scan_pose(scan.scan_index))
+            clouds.append(transform_points(relative, scan.scan.points_m))
+        points = np.vstack(clouds)
+        return prepare_scan(
+            np.arctan2(points[:, 1], points[:, 0]),
+            np.hypot(points[:, 0], points[:, 1]),
+            self.config,
+        )
+
     def _constrain(
-        self, slam: SlamBackend, a: _KeyframeScan, b: _KeyframeScan, robust: bool
+        self,
+        slam: SlamBackend,
+        a: _KeyframeScan,
+        b: _KeyframeScan,
+        robust: bool,
+        reference: PreparedScan | None = None,
     ) -> bool:
+        """Match b to a (or to ``reference``, a submap in a's frame) and add the factor if
+        the match is verified."""
         guess = between(slam.scan_pose(a.scan_index), slam.scan_pose(b.scan_index))
-        result = match_scans(a.scan, b.scan, guess, self.config)
-        if not verify(result, guess, self.config):
-            self.rejected += 1
+        reference = a.scan if reference is None else reference
+        result = match_scans(reference, b.scan, guess, self.config)
+        limit_m = None
+        if robust:
+            way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
+            limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
+        if not verify(result, guess, self.config, strict=robust, max_correction_m=limit_m):
             return False
         slam.add_scan_constraint(
             a.scan_index, b.scan_index, result.relative, result.covariance, robust
