@@ -1,0 +1,278 @@
+"""Map-side benchmarks: scan integration, costmap, scan matching, frontiers, allocation."""
+
+from __future__ import annotations
+
+import time
+from functools import partial
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from acslam.benchmarks.core import Figure, median_ms
+from acslam.config import (
+    AllocationConfig,
+    CostmapConfig,
+    ExplorationConfig,
+    LidarConfig,
+    MappingConfig,
+    RobotsConfig,
+    ScanMatchingConfig,
+    ThesisWorld,
+)
+from acslam.exploration.allocation import allocate
+from acslam.exploration.clustering import FrontierCluster, cluster_frontiers
+from acslam.exploration.frontiers import (
+    EwfdFrontierDetector,
+    active_radius_m,
+    reachable_frontier_cells,
+)
+from acslam.geometry import compose
+from acslam.grid import GridSpec
+from acslam.mapping import LogOddsGrid, TeamMap, compute_costmap, grid_spec_for_bounds
+from acslam.mapping.scan_matching import match_scans, prepare_scan
+from acslam.planning.astar import astar_cells
+from acslam.sim.lidar import LidarSensor
+from acslam.worlds.generators import build_world
+from acslam.worlds.world import World
+
+
+def _room_ranges(pose: np.ndarray, angles: np.ndarray, half_size_m: float) -> np.ndarray:
+    """Ranges to the walls of a square room centred at the origin, inf beyond 8 m."""
+    dx, dy = np.cos(pose[2] + angles), np.sin(pose[2] + angles)
+    with np.errstate(divide="ignore"):
+        tx = (np.sign(dx) * half_size_m - pose[0]) / dx
+        ty = (np.sign(dy) * half_size_m - pose[1]) / dy
+    ranges = np.minimum(np.abs(tx), np.abs(ty))
+    ranges[ranges > 8.0] = np.inf
+    return ranges
+
+
+def bench_mapping(quick: bool) -> list[Figure]:
+    """Scan integration and costmap on the thesis's 800 x 800 grid, against ``np.copy`` of it.
+
+    Goals (10 Hz LiDAR, thesis-scale maps): <= 2 ms per 360-beam scan, <= 20 ms per costmap.
+    """
+    spec = grid_spec_for_bounds(-20.0, -20.0, 20.0, 20.0, 0.05)
+    grid = LogOddsGrid(spec, MappingConfig(max_range_m=8.0))
+    reference = np.zeros(spec.shape)
+    copy_ms = median_ms(lambda: np.copy(reference), 50 if quick else 200)
+    rng = np.random.default_rng(0)
+    angles = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    poses = [np.array([*rng.uniform(-3.0, 3.0, 2), rng.uniform(-np.pi, np.pi)]) for _ in range(50)]
+    scans = [(_room_ranges(pose, angles, 7.0), pose) for pose in poses]
+    for ranges, pose in scans:
+        grid.integrate(ranges, angles, pose)
+    index = iter(range(10**9))
+
+    def integrate_one() -> None:
+        ranges, pose = scans[next(index) % len(scans)]
+        grid.integrate(ranges, angles, pose)
+
+    scan_ms = median_ms(integrate_one, 60 if quick else 300)
+    team = TeamMap(spec, grid.config)
+    team.add_scan(0, "moved", scans[0][0], angles, scans[0][1])
+    shifts = iter(range(10**9))
+
+    def move_one() -> None:
+        team.move_scan("moved", scans[0][1] + (0.02 if next(shifts) % 2 else 0.0))
+
+    move_ms = median_ms(move_one, 20 if quick else 100)
+    values = grid.to_occupancy_values()
+    costmap_ms = median_ms(
+        lambda: compute_costmap(values, spec, CostmapConfig(), RobotsConfig().radius_m),
+        5 if quick else 30,
+    )
+    edt_ms = median_ms(lambda: ndimage.distance_transform_edt(values != 100), 5 if quick else 30)
+    reference_name = f"np.copy of the {spec.rows}x{spec.cols} float64 grid"
+    return [
+        Figure(
+            "mapping",
+            "scan integration (360 beams, 8 m)",
+            scan_ms,
+            "ms",
+            reference_name,
+            copy_ms,
+            "goal <= 2 ms",
+        ),
+        Figure(
+            "mapping", "TeamMap.move_scan (global + robot)", move_ms, "ms", reference_name, copy_ms
+        ),
+        Figure(
+            "mapping",
+            "costmap (EDT + decay + lethal)",
+            costmap_ms,
+            "ms",
+            "scipy EDT of the same grid",
+            edt_ms,
+            "goal <= 20 ms",
+        ),
+    ]
+
+
+def _room_world() -> World:
+    """An 8 m x 6 m room with four boxes, 0.05 m cells."""
+    occupied = np.zeros((122, 162), dtype=bool)
+    occupied[0, :] = occupied[-1, :] = occupied[:, 0] = occupied[:, -1] = True
+    for row, col, height, width in (
+        (20, 30, 10, 14),
+        (80, 40, 8, 8),
+        (50, 110, 15, 6),
+        (95, 120, 6, 20),
+    ):
+        occupied[row : row + height, col : col + width] = True
+    return World("room", GridSpec(0.0, 0.0, 0.05, 122, 162), occupied)
+
+
+def bench_scan_matching(quick: bool) -> list[Figure]:
+    """Point-to-line ICP of two simulated scans against building a cKDTree of one (goal 5 ms)."""
+    config = ScanMatchingConfig()
+    sensor = LidarSensor(LidarConfig(), _room_world(), np.random.default_rng(0))
+    pose_a = np.array([4.0, 3.5, 0.3])
+    pose_b = compose(pose_a, np.array([0.3, -0.2, 0.15]))
+    no_discs = np.zeros((0, 3))
+    scan_a, scan_b = (sensor.scan(0, 0.0, tuple(pose), no_discs, -1) for pose in (pose_a, pose_b))
+    reference = prepare_scan(scan_a.angles, scan_a.ranges, config)
+    query = prepare_scan(scan_b.angles, scan_b.ranges, config)
+    guess = np.array([0.3, -0.2, 0.15]) + np.array([0.05, -0.05, 0.03])
+    repeats = 50 if quick else 300
+    tree_ms = median_ms(lambda: cKDTree(reference.points_m), repeats)
+    match_ms = median_ms(lambda: match_scans(reference, query, guess, config), repeats)
+    return [
+        Figure(
+            "scan matching",
+            "match_scans (prepared 360-beam scans)",
+            match_ms,
+            "ms",
+            "cKDTree build of one scan",
+            tree_ms,
+            "goal <= 5 ms",
+        ),
+    ]
+
+
+def _scripted_paths(world: World, rng: np.random.Generator, rounds: int) -> list[np.ndarray]:
+    """Per start pose, (rounds, 2) positions every 0.25 m along A* legs to random goals."""
+    lethal = world.clearance_m < 0.25
+    cost = np.zeros(world.spec.shape)
+    free_cells = np.argwhere(~lethal & world.reachable_free(*world.default_starts[0, :2]))
+    stride = max(1, round(0.25 / world.spec.resolution_m))
+    paths = []
+    for start in world.default_starts:
+        cell = tuple(int(v) for v in world.spec.world_to_cell(start[:2])[0])
+        current = tuple(free_cells[np.argmin(((free_cells - cell) ** 2).sum(axis=1))])
+        points: list[np.ndarray] = []
+        while len(points) < rounds:
+            goal = tuple(int(v) for v in free_cells[rng.integers(len(free_cells))])
+            cells, _ = astar_cells(cost, lethal, current, goal, world.spec.resolution_m, 0.0)
+            points.extend(world.spec.cell_to_world(cells[::stride]))
+            current = goal
+        paths.append(np.array(points[:rounds]))
+    return paths
+
+
+def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
+    """Incremental EWFD against the naive full-grid scan on the same map, thesis world 4.
+
+    Three robots follow scripted A* paths, each scanning every 0.25 m; after every round
+    both detectors run and must return the same cells. Also returns the final map for
+    the clustering and allocation benchmark.
+    """
+    rounds = 40 if quick else 240
+    world = build_world(ThesisWorld(generator="thesis", experiment=4), 0)
+    rng = np.random.default_rng(0)
+    mapping = MappingConfig()
+    team = TeamMap(world.spec, mapping)
+    sensors = [LidarSensor(LidarConfig(), world, np.random.default_rng(k)) for k in range(3)]
+    paths = _scripted_paths(world, rng, rounds)
+    detector = EwfdFrontierDetector(world.spec, active_radius_m(mapping))
+    no_discs = np.zeros((0, 3))
+    ewfd_s, naive_s = [], []
+    for step in range(rounds):
+        positions = np.array([path[step] for path in paths])
+        for k, sensor in enumerate(sensors):
+            pose = np.array([*positions[k], rng.uniform(-np.pi, np.pi)])
+            scan = sensor.scan(k, float(step), tuple(pose), no_discs, -1)
+            team.add_scan(k, (k, step), scan.ranges, scan.angles, pose, scan.range_max_m)
+        values = team.global_grid.to_occupancy_values()
+        robot_cells = world.spec.world_to_cell(positions)
+        t0 = time.perf_counter()
+        got = detector.update(values, robot_cells, robot_cells)
+        t1 = time.perf_counter()
+        expected = reachable_frontier_cells(values, robot_cells)
+        t2 = time.perf_counter()
+        if not np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected):
+            raise AssertionError(f"EWFD and the naive scan disagree at round {step}")
+        if step > 0:  # the first update is the full initial search
+            ewfd_s.append(t1 - t0)
+            naive_s.append(t2 - t1)
+    figures = [
+        Figure(
+            "exploration",
+            f"EWFD frontier update ({rounds} rounds x 3 scans, 800x800)",
+            1e3 * float(np.mean(ewfd_s)),
+            "ms",
+            "naive full-grid frontier scan",
+            1e3 * float(np.mean(naive_s)),
+            "same cells every round; goal ratio <= 0.1",
+        ),
+    ]
+    return figures, {"world": world, "values": values, "frontier": got}
+
+
+def bench_allocation(
+    quick: bool, world: World, values: np.ndarray, frontier: np.ndarray
+) -> list[Figure]:
+    """DBSCAN clustering and the four allocators (20 clusters) against an 800x800 ``np.sort``."""
+    data = np.random.default_rng(0).random((800, 800))
+    sort_ms = median_ms(lambda: np.sort(data, axis=1), 5)
+    reference = "np.sort of 800x800 float64 rows"
+    spec = world.spec
+    costmap = compute_costmap(values, spec, CostmapConfig(), RobotsConfig().radius_m)
+    exploration = ExplorationConfig()
+    clusters = cluster_frontiers(frontier, values, spec, costmap, exploration)
+    figures = [
+        Figure(
+            "exploration",
+            f"DBSCAN clustering ({len(frontier)} frontier cells)",
+            median_ms(lambda: cluster_frontiers(frontier, values, spec, costmap, exploration), 3),
+            "ms",
+            reference,
+            sort_ms,
+        ),
+    ]
+    rng = np.random.default_rng(1)
+    reachable = np.argwhere((values == 0) & ~costmap.lethal)
+    extra = reachable[rng.choice(len(reachable), 20, replace=False)]
+    clusters = (
+        clusters
+        + [
+            FrontierCluster(
+                cell[None, :],
+                spec.cell_to_world(cell)[0],
+                cell,
+                spec.cell_to_world(cell)[0],
+                int(rng.integers(5, 60)),
+                0,
+            )
+            for cell in extra
+        ]
+    )[:20]
+    for robots in (3,) if quick else (3, 5, 8):
+        cells = reachable[rng.choice(len(reachable), robots, replace=False)]
+        for method in ("factor-graph", "hungarian", "greedy", "thesis"):
+            run = partial(allocate, cells, clusters, costmap, AllocationConfig(method=method))
+            figures.append(
+                Figure(
+                    "exploration",
+                    f"allocation {method}, {robots} robots x 20 clusters",
+                    median_ms(run, 2),
+                    "ms",
+                    reference,
+                    sort_ms,
+                    "straight-line distances, no Dijkstra"
+                    if method == "thesis"
+                    else "includes one Dijkstra per robot",
+                )
+            )
+    return figures

@@ -1,0 +1,44 @@
+"""The Ray executor gives the same run folders and metrics as the process pool."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from acslam.experiments.grid import expand, parse_grid
+from acslam.experiments.sweep import ProcessPoolRunner, sweep
+
+ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install 'acslam[ray]'")
+
+# Wall-clock figures differ from run to run whatever runs them; everything else must not.
+WALL_CLOCK_KEYS = {"wall_time_s", "real_time_factor", "server_cycle_ms"}
+
+
+def _metrics(folder: Path) -> dict:
+    metrics = json.loads((folder / "metrics.json").read_text())
+    return {k: v for k, v in metrics.items() if k not in WALL_CLOCK_KEYS}
+
+
+def test_ray_and_process_pool_give_the_same_runs(tmp_path: Path) -> None:
+    from acslam.experiments.ray_executor import RayRunner
+
+    grid = parse_grid(
+        {
+            "name": "tiny",
+            "max_time_s": 6,
+            "blocks": [{"scenarios": ["thesis-exp1"], "robots": [1, 2]}],
+        },
+        "tiny.yaml",
+    )
+    specs = expand(grid)
+    by_pool = sweep(specs, tmp_path / "pool", ProcessPoolRunner(2))
+    by_ray = sweep(specs, tmp_path / "ray", RayRunner())
+    assert sorted(r.run_id for r in by_ray) == sorted(r.run_id for r in by_pool)
+    for spec in specs:
+        pool_folder = tmp_path / "pool" / "runs" / spec.run_id
+        ray_folder = tmp_path / "ray" / "runs" / spec.run_id
+        assert _metrics(ray_folder) == _metrics(pool_folder)
+        assert (ray_folder / "report.html").is_file()
+        assert (ray_folder / "trajectories").is_dir()
