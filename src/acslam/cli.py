@@ -7,14 +7,20 @@ the work itself lives in the library modules the commands call.
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
 from rich.table import Table
 
 from acslam.errors import AcslamError
+
+if TYPE_CHECKING:
+    from acslam.scenario import Scenario
 
 DEFAULT_SCENARIO = "thesis-exp1"
 
@@ -36,6 +42,24 @@ robots_option = click.option(
 seed_option = click.option(
     "--seed", type=click.IntRange(min=0), default=None, help="Override the scenario seed."
 )
+
+
+def fault_options(command: Callable) -> Callable:
+    """--drop-rate and --latency-ms: faults a robot agent injects into its sensor messages."""
+    command = click.option(
+        "--latency-ms",
+        type=click.FloatRange(min=0, max=60000, max_open=True),
+        default=0.0,
+        show_default=True,
+        help="Delay added to every sensor message a robot sends.",
+    )(command)
+    return click.option(
+        "--drop-rate",
+        type=click.FloatRange(min=0, max=1, max_open=True),
+        default=0.0,
+        show_default=True,
+        help="Fraction of sensor messages a robot drops (seeded).",
+    )(command)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -122,6 +146,26 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     default=None,
     help="Simulated seconds before the run stops [default: the scenario's sim.max_time_s].",
 )
+@click.option(
+    "--distributed",
+    is_flag=True,
+    help="Server here and one `acslam robot` process per robot over Zenoh on loopback, "
+    "in real time.",
+)
+@fault_options
+@click.option(
+    "--viz",
+    type=click.Choice(["none", "rerun"]),
+    default="none",
+    show_default=True,
+    help="Log map, costmap, scans, trajectories, frontiers, goals and paths to Rerun.",
+)
+@click.option(
+    "--viz-out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write the Rerun recording to this .rrd file [default: spawn a live viewer].",
+)
 def run_command(
     scenario_name: str,
     robots: int | None,
@@ -130,6 +174,11 @@ def run_command(
     allocator: str | None,
     out_dir: Path | None,
     max_time_s: float | None,
+    distributed: bool,
+    drop_rate: float,
+    latency_ms: float,
+    viz: str,
+    viz_out: Path | None,
 ) -> None:
     """Explore a scenario with the full server in the loop and write the run folder."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -137,6 +186,10 @@ def run_command(
     from acslam.runner import run_exploration
     from acslam.scenario import load_scenario
 
+    if (drop_rate or latency_ms) and not distributed:
+        raise click.UsageError("--drop-rate and --latency-ms need --distributed")
+    if viz_out is not None and viz == "none":
+        raise click.UsageError("--viz-out needs --viz rerun")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     scenario = scenario.with_algorithms(local_planner=planner, allocation_method=allocator)
     if out_dir is None:
@@ -167,9 +220,37 @@ def run_command(
                 frontiers=status.frontier_cells,
             )
 
-        metrics = run_exploration(scenario, out_dir, limit_s, on_progress=show)
+        with _visualizer(viz, viz_out, scenario) as on_step:
+            if distributed:
+                from acslam.distributed.launch import run_distributed
+                from acslam.distributed.robot_node import RobotOptions
+                from acslam.transport.zenoh_link import FaultInjection
+
+                options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
+                metrics = run_distributed(
+                    scenario, scenario_name, out_dir, limit_s, options, show, on_step
+                )
+            else:
+                metrics = run_exploration(
+                    scenario, out_dir, limit_s, on_progress=show, on_step=on_step
+                )
     _print_summary(metrics, reachable_m2)
     _console.print(f"run folder: {out_dir}  (report: {out_dir / 'report.html'})")
+
+
+@contextmanager
+def _visualizer(viz: str, viz_out: Path | None, scenario: Scenario) -> Iterator:
+    """The per-step logging callback ``--viz`` asks for (None for ``none``)."""
+    if viz == "none":
+        yield None
+        return
+    from acslam.viz.rerun_log import RerunLogger
+
+    logger = RerunLogger(scenario, viz_out)
+    try:
+        yield logger.log_step
+    finally:
+        logger.close()
 
 
 def _print_summary(metrics: dict, reachable_m2: float) -> None:
@@ -261,6 +342,264 @@ def slam_mrclam_command(
         f"{metrics['landmarks']['rmse_m']:.3f} m, association precision "
         f"{metrics['association']['pairwise_precision']:.3f} -> {out_dir / 'metrics.json'}"
     )
+
+
+@slam_group.command("carmen")
+@click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for trajectory.tum, map.yaml/.pgm/.png, odometry_vs_slam.png, metrics.json.",
+)
+def slam_carmen_command(log: Path, out_dir: Path) -> None:
+    """Replay a CARMEN laser log (ODOM + FLASER, plain, .bz2 or .gz) through SLAM and mapping.
+
+    Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
+    of every scan at its optimised pose; one TUM pose per FLASER line (ipc stamps).
+    """
+    from acslam.slam.carmen_eval import run_carmen
+
+    metrics = run_carmen(log, out_dir)
+    skipped = metrics["skipped_lines"]["count"]
+    click.echo(
+        f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "
+        f"{metrics['loop_closures']['accepted']} loop closures "
+        f"({metrics['loop_closures']['rejected']} rejected), {skipped} malformed lines skipped; "
+        f"{metrics['log_duration_s']:.0f} s of log in {metrics['wall_time_s']:.0f} s "
+        f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
+    )
+
+
+@cli.group("experiments")
+def experiments_group() -> None:
+    """Sweep grids of runs in parallel and summarize them like thesis chapter 5."""
+
+
+def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
+    """--out, --workers, --executor and --max-time, shared by the experiments commands."""
+    function = click.option(
+        "--max-time",
+        "max_time_s",
+        type=click.FloatRange(min=0, min_open=True),
+        default=None,
+        help="Simulated seconds per run [default: the grid's, else the scenario's].",
+    )(function)
+    function = click.option(
+        "--ray-address",
+        default=None,
+        help="With --executor ray: a running cluster ('auto', 'ray://HOST:10001') "
+        "[default: start a local one].",
+    )(function)
+    function = click.option(
+        "--executor",
+        type=click.Choice(["process", "ray"]),
+        default="process",
+        show_default=True,
+        help="process: a pool of local worker processes; ray: Ray tasks on a cluster.",
+    )(function)
+    function = click.option(
+        "--workers",
+        type=click.IntRange(min=1),
+        default=2,
+        show_default=True,
+        help="Runs in parallel, one process each.",
+    )(function)
+    return click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        required=True,
+        help="Sweep folder: runs/<run-id>/ per run, summary.md and summary.html.",
+    )(function)
+
+
+def _sweep_and_summarize(
+    specs: list, out_dir: Path, options: dict[str, object], title: str
+) -> None:
+    from acslam.experiments.summary import write_summary
+    from acslam.experiments.sweep import ProcessPoolRunner, sweep_with_progress
+
+    if options["executor"] == "ray":
+        from acslam.experiments.ray_executor import RayRunner
+
+        runner = RayRunner(address=options["ray_address"], local_cpus=options["workers"])
+    else:
+        runner = ProcessPoolRunner(options["workers"])
+    sweep_with_progress(specs, out_dir, runner, _console)
+    markdown, page = write_summary(out_dir, title)
+    _console.print(f"summary: {markdown}  {page}")
+
+
+@experiments_group.command("thesis")
+@_sweep_options
+@click.option(
+    "--seeds", type=click.IntRange(min=1), default=1, show_default=True, help="Seeds per cell."
+)
+@click.option(
+    "--grid",
+    "grid_name",
+    type=click.Choice(["thesis", "scaling"]),
+    default="thesis",
+    show_default=True,
+    help="thesis: §5.5 experiments 1-5 plus allocator/planner comparisons; "
+    "scaling: 40 m dungeon and vineyard with 1, 2, 4, 8 robots.",
+)
+def experiments_thesis_command(
+    out_dir: Path, max_time_s: float | None, seeds: int, grid_name: str, **executor: object
+) -> None:
+    """Reproduce thesis §5.5 (experiments 1-5 with 1-3 robots) and compare algorithms."""
+    from acslam.experiments.grid import builtin_grid, expand
+
+    specs = expand(builtin_grid(grid_name), max_time_s=max_time_s, seeds=seeds)
+    _sweep_and_summarize(specs, out_dir, executor, f"acslam experiments: {grid_name} grid")
+
+
+@experiments_group.command("grid")
+@click.argument("grid_file", type=click.Path(dir_okay=False, path_type=Path))
+@_sweep_options
+def experiments_grid_command(
+    grid_file: Path, out_dir: Path, max_time_s: float | None, **executor: object
+) -> None:
+    """Run the grid of a YAML file (scenarios x robots x planners x allocators x seeds)."""
+    from acslam.experiments.grid import expand, load_grid_file
+
+    grid = load_grid_file(grid_file)
+    specs = expand(grid, max_time_s=max_time_s)
+    _sweep_and_summarize(specs, out_dir, executor, f"acslam experiments: {grid.name}")
+
+
+@cli.command("bench")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("."),
+    show_default=True,
+    help="Folder for bench.json.",
+)
+@click.option("--quick", is_flag=True, help="Smaller problems: about a minute in all.")
+def bench_command(out_dir: Path, quick: bool) -> None:
+    """Time every module against a reference measured in the same process."""
+    from acslam.benchmarks import print_table, run_benchmarks, write_json
+
+    results = run_benchmarks(quick=quick, console=_console)
+    print_table(results, _console)
+    _console.print(f"bench: {write_json(results, out_dir)}")
+
+
+@cli.command("serve")
+@scenario_option
+@robots_option
+@seed_option
+@click.option(
+    "--listen",
+    required=True,
+    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (tcp/127.0.0.1:PORT locally).",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Run folder [default: runs/<scenario>-<time>-serve].",
+)
+@click.option(
+    "--max-time",
+    "max_time_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Wall-clock seconds before the run stops [default: the scenario's sim.max_time_s].",
+)
+@click.option(
+    "--heartbeat-timeout",
+    "heartbeat_timeout_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=2.0,
+    show_default=True,
+    help="Seconds without a heartbeat before a robot is declared lost.",
+)
+def serve_command(
+    scenario_name: str,
+    robots: int | None,
+    seed: int | None,
+    listen: str,
+    out_dir: Path | None,
+    max_time_s: float | None,
+    heartbeat_timeout_s: float,
+) -> None:
+    """Run the server in wall-clock time for robots connecting over Zenoh."""
+    from acslam.distributed.server_node import ServeOptions, serve
+    from acslam.scenario import load_scenario
+
+    scenario = load_scenario(scenario_name, robots=robots, seed=seed)
+    if out_dir is None:
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"
+    limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
+    options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
+    click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
+    metrics = serve(scenario, listen, out_dir, limit_s, options)
+    _print_summary(metrics, scenario.reachable_area_m2)
+
+
+@cli.command("robot")
+@scenario_option
+@robots_option
+@seed_option
+@click.option("--id", "robot_id", type=click.IntRange(min=0), required=True, help="Robot index.")
+@click.option(
+    "--connect", required=True, help="The server's Zenoh endpoint, e.g. tcp/10.0.0.5:7447."
+)
+@click.option(
+    "--max-time",
+    "max_time_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Seconds before the robot stops [default: the scenario's sim.max_time_s].",
+)
+@fault_options
+@click.option(
+    "--command-timeout",
+    "command_timeout_s",
+    type=click.FloatRange(min=0, min_open=True),
+    default=0.5,
+    show_default=True,
+    help="Seconds without a velocity command before the robot stops.",
+)
+@click.option(
+    "--truth-out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Write this robot's ground-truth log (.npz) here when it stops.",
+)
+def robot_command(
+    scenario_name: str,
+    robots: int | None,
+    seed: int | None,
+    robot_id: int,
+    connect: str,
+    max_time_s: float | None,
+    drop_rate: float,
+    latency_ms: float,
+    command_timeout_s: float,
+    truth_out: Path | None,
+) -> None:
+    """Run one simulated robot in real time against a server over Zenoh."""
+    from acslam.distributed.robot_node import RobotOptions, run_robot
+    from acslam.scenario import load_scenario
+    from acslam.transport.zenoh_link import FaultInjection
+
+    scenario = load_scenario(scenario_name, robots=robots, seed=seed)
+    limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
+    options = RobotOptions(
+        faults=FaultInjection(drop_rate, latency_ms / 1000),
+        command_timeout_s=command_timeout_s,
+        truth_out=truth_out,
+    )
+    reason = run_robot(scenario, robot_id, connect, limit_s, options)
+    click.echo(f"robot_{robot_id}: stopped ({reason})")
 
 
 def main() -> None:

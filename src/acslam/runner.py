@@ -1,7 +1,9 @@
 """Closes the loop of thesis Fig. 4.2 on the simulated clock and writes the run folder.
 
 Every control period the server gets the messages the robots sent since the last one
-and answers with velocity commands; the simulator advances until the next period.
+(through the in-process transport) and answers with velocity commands; the simulator
+advances until the next period. The scoring and writing half (:func:`finish_run`) is
+shared with the distributed run, which gets its ground truth over the wire instead.
 Ground truth is read only after the run, for the metrics. Whatever happens, the run folder
 gets ``config.yaml`` first and ``metrics.json`` last, with ``completed`` and ``reason``,
 so a failed or timed-out run keeps what it produced.
@@ -14,6 +16,7 @@ import math
 import time
 import traceback
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,11 +30,13 @@ from acslam.eval.metrics import (
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
+from acslam.grid import GridSpec
 from acslam.messages import RobotMessage
 from acslam.scenario import Scenario
 from acslam.server import Server, ServerStatus
 from acslam.sim.simulator import Simulator
 from acslam.trajectory import write_tum
+from acslam.transport.inprocess import InProcessBus
 from acslam.worlds.mapio import save_map
 
 EXPLORED_SAMPLE_PERIOD_S = 1.0
@@ -54,8 +59,12 @@ def run_exploration(
     out_dir: Path,
     max_time_s: float,
     on_progress: Callable[[ServerStatus, float], None] | None = None,
+    on_step: Callable[[Server, float, list[RobotMessage]], None] | None = None,
 ) -> dict:
-    """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written."""
+    """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written.
+
+    ``on_step`` sees the server after every step and the messages of that step (live
+    views)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
@@ -71,35 +80,89 @@ def run_exploration(
     )
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
-    explored_history: list[tuple[float, float]] = []
-    cell_area_m2 = scenario.world.spec.resolution_m**2
-    next_sample_s = 0.0
+    bus = InProcessBus()
+    progress = ExploredHistory(server, scenario.world.spec, on_progress)
     reason = "time limit"
     started = time.perf_counter()
-    messages: list[RobotMessage] = []
     try:
         while sim.time_s < max_time_s - 1e-9:
-            commands = server.step(messages, sim.time_s)
+            messages = bus.receive()
+            bus.send(server.step(messages, sim.time_s))
+            if on_step is not None:
+                on_step(server, sim.time_s, messages)
             if server.finished:
                 reason = "explored"
                 break
-            messages = sim.step(commands)
-            for _ in range(substeps - 1):
-                messages += sim.step()
-            if sim.time_s >= next_sample_s:
-                known = server.team_map.global_grid.known_mask()
-                explored_history.append((sim.time_s, float(known.sum()) * cell_area_m2))
-                next_sample_s += EXPLORED_SAMPLE_PERIOD_S
-                if on_progress is not None:
-                    on_progress(server.status(sim.time_s), explored_history[-1][1])
+            for _ in range(substeps):
+                for message in sim.step(bus.receive_commands()):
+                    bus.publish(message)
+            progress.sample(sim.time_s)
     except AcslamError as exc:
         reason = f"error: {exc}"
     except Exception as exc:  # the run's products must survive any failure
         reason = f"error: {type(exc).__name__}: {exc}"
         (out_dir / "error.txt").write_text(traceback.format_exc())
     wall_time_s = time.perf_counter() - started
-    record = _record(scenario, server, sim, explored_history)
-    metrics = _metrics(scenario, server, sim, record, reason, wall_time_s)
+    truth = TruthLog.of_simulator(sim)
+    return finish_run(
+        out_dir, scenario, server, truth, progress.history, reason, wall_time_s, sim.time_s
+    )
+
+
+class ExploredHistory:
+    """Samples the explored area once per simulated second (and reports progress)."""
+
+    def __init__(
+        self,
+        server: Server,
+        spec: GridSpec,
+        on_progress: Callable[[ServerStatus, float], None] | None = None,
+    ) -> None:
+        self.server = server
+        self.history: list[tuple[float, float]] = []
+        self._cell_area_m2 = spec.resolution_m**2
+        self._next_sample_s = 0.0
+        self._on_progress = on_progress
+
+    def sample(self, time_s: float) -> None:
+        if time_s < self._next_sample_s:
+            return
+        known = self.server.team_map.global_grid.known_mask()
+        self.history.append((time_s, float(known.sum()) * self._cell_area_m2))
+        self._next_sample_s += EXPLORED_SAMPLE_PERIOD_S
+        if self._on_progress is not None:
+            self._on_progress(self.server.status(time_s), self.history[-1][1])
+
+
+@dataclass(frozen=True)
+class TruthLog:
+    """The ground truth a run is scored against: ``[t, x, y, theta]`` rows per robot and
+    (N, 2) contact counts (walls, robots)."""
+
+    trajectories: list[np.ndarray]
+    collisions: np.ndarray
+
+    @classmethod
+    def of_simulator(cls, sim: Simulator) -> TruthLog:
+        gt = sim.ground_truth
+        return cls([gt.trajectory(i) for i in range(sim.robot_count)], gt.collisions)
+
+
+def finish_run(
+    out_dir: Path,
+    scenario: Scenario,
+    server: Server,
+    truth: TruthLog,
+    explored_history: list[tuple[float, float]],
+    reason: str,
+    wall_time_s: float,
+    time_s: float,
+    extra: dict | None = None,
+) -> dict:
+    """Score a finished run and write its folder; ``extra`` adds metric sections."""
+    record = _record(scenario, server, truth, explored_history)
+    metrics = _metrics(scenario, server, truth, record, reason, wall_time_s, time_s)
+    metrics.update(extra or {})
     _write_outputs(out_dir, scenario, record)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
     write_report(out_dir, record, metrics)
@@ -107,13 +170,13 @@ def run_exploration(
 
 
 def _record(
-    scenario: Scenario, server: Server, sim: Simulator, explored_history: list
+    scenario: Scenario, server: Server, truth_log: TruthLog, explored_history: list
 ) -> RunRecord:
     """The arrays figures and metrics are made from, saved so reports can be rebuilt."""
     world = scenario.world
     count = scenario.robot_count
     estimated = [server.slam.trajectory(i) for i in range(count)]
-    truth = [sim.ground_truth.trajectory(i) for i in range(count)]
+    truth = truth_log.trajectories
     return RunRecord(
         spec=world.spec,
         true_occupied=world.occupied,
@@ -131,21 +194,19 @@ def _record(
 def _metrics(
     scenario: Scenario,
     server: Server,
-    sim: Simulator,
+    truth: TruthLog,
     record: RunRecord,
     reason: str,
     wall_time_s: float,
+    time_s: float,
 ) -> dict:
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
-    finish = {
-        names[i]: (
-            task.idle_since_s
-            if reason == "explored" and task.idle_since_s is not None
-            else sim.time_s
-        )
-        for i, task in enumerate(server.tasks)
-    }
+    idle_or_end = [
+        task.idle_since_s if reason == "explored" and task.idle_since_s is not None else time_s
+        for task in server.tasks
+    ]
+    finish = {names[i]: server.lost.get(i, end) for i, end in enumerate(idle_or_end)}
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
@@ -153,13 +214,13 @@ def _metrics(
     cell_area_m2 = scenario.world.spec.resolution_m**2
     known = record.estimated_values != -1
     reachable = record.reachable
-    true_xy = np.stack([t[:, 1:3] for t in record.true_trajectories], axis=1)
     if count > 1:
+        true_xy = _common_clock_xy(record.true_trajectories)
         gaps = np.linalg.norm(true_xy[:, :, None] - true_xy[:, None], axis=-1)
         min_distance = float(gaps[:, ~np.eye(count, dtype=bool)].min())
     else:
         min_distance = math.inf
-    collisions = sim.ground_truth.collisions
+    collisions = truth.collisions
     samples = server.timer.samples
     cycle = np.array(samples.get("cycle", [0.0]))
     per_module = {
@@ -175,9 +236,9 @@ def _metrics(
         "allocator": scenario.config.algorithms.allocation.method,
         "completed": reason == "explored",
         "reason": reason,
-        "sim_time_s": sim.time_s,
+        "sim_time_s": time_s,
         "wall_time_s": wall_time_s,
-        "real_time_factor": sim.time_s / max(wall_time_s, 1e-9),
+        "real_time_factor": time_s / max(wall_time_s, 1e-9),
         "timing": timing(finish),
         "localization": localization,
         "coverage": {
@@ -199,6 +260,25 @@ def _metrics(
             **per_module,
         },
     }
+
+
+def _common_clock_xy(trajectories: list[np.ndarray]) -> np.ndarray:
+    """(T, N, 2) positions of all robots at shared times.
+
+    In-process runs log every robot at every step; robots of a distributed run log on
+    their own clocks (and a lost one stops early, standing where it was), so they are
+    interpolated onto the longest log's stamps.
+    """
+    if len({len(t) for t in trajectories}) == 1:
+        return np.stack([t[:, 1:3] for t in trajectories], axis=1)
+    stamps = max(trajectories, key=len)[:, 0]
+    return np.stack(
+        [
+            np.column_stack([np.interp(stamps, t[:, 0], t[:, k]) for k in (1, 2)])
+            for t in trajectories
+        ],
+        axis=1,
+    )
 
 
 def _write_outputs(out_dir: Path, scenario: Scenario, record: RunRecord) -> None:

@@ -149,6 +149,23 @@ class Server:
         self._next_replan_s = 0.0
         self._replan_now = True
         self.finished = False
+        self.lost: dict[int, float] = {}
+
+    def mark_lost(self, robot_id: int, now_s: float) -> None:
+        """Give up on a robot that stopped answering (e.g. heartbeat timeout).
+
+        Its frontier goes back to the pool at once, its planner state is dropped and it
+        gets no more goals; the others plan around its last estimated pose, where it
+        stands. Its map and trajectory so far stay.
+        """
+        if robot_id in self.lost:
+            return
+        self.lost[robot_id] = now_s
+        task = self.tasks[robot_id]
+        task.cluster, task.path_m, task.velocity = None, None, (0.0, 0.0)
+        if self._fgp is not None:
+            self._fgp.reset(robot_id)
+        self._replan_now = True
 
     # ------------------------------------------------------------------ pipeline
 
@@ -187,6 +204,18 @@ class Server:
         with self.timer.measure("local_planning"):
             commands = self._local_plan(poses, now_s)
         return [VelocityCommand(i, now_s, v, w) for i, (v, w) in enumerate(commands)]
+
+    @property
+    def costmap(self) -> tuple[Costmap, Window] | None:
+        """The latest costmap and the grid window it covers (read-only, for live views)."""
+        if self._costmap is None or self._window is None:
+            return None
+        return self._costmap, self._window
+
+    @property
+    def frontier_cells(self) -> np.ndarray:
+        """(n, 2) ``[row, col]`` frontier cells of the full grid (read-only)."""
+        return self._frontier_cells
 
     def status(self, now_s: float) -> ServerStatus:
         return ServerStatus(
@@ -284,17 +313,19 @@ class Server:
             return
         robot_cells = window.spec.world_to_cell(poses[:, :2])
         robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
-        current = [self._matching_cluster(task) for task in self.tasks]
+        active = [i for i in range(self.robot_count) if i not in self.lost]
+        current = [self._matching_cluster(self.tasks[i]) for i in active]
         allocation = allocate(
-            robot_cells,
+            robot_cells[active],
             self._clusters,
             costmap,
             self.config.algorithms.allocation,
             current,
         )
         planning = self.config.algorithms.planning
-        for i, task in enumerate(self.tasks):
-            choice = allocation.cluster_of_robot[i]
+        for k, i in enumerate(active):
+            task = self.tasks[i]
+            choice = allocation.cluster_of_robot[k]
             path = None
             if choice is not None:
                 cluster = self._clusters[choice]
@@ -319,12 +350,12 @@ class Server:
             task.cluster = self._clusters[choice]
             task.path_m = np.vstack([poses[i, :2], path.points_m])
             task.recovery.replanned(
-                now_s, choice != current[i], remaining_length_m(task.path_m, poses[i, :2])
+                now_s, choice != current[k], remaining_length_m(task.path_m, poses[i, :2])
             )
             task.idle_since_s = None
         # Done once every robot has had nothing to do for a while after the map has begun:
         # frontiers briefly vanish while a robot stands on the last one it was sent to.
-        idle_since = [t.idle_since_s for t in self.tasks]
+        idle_since = [self.tasks[i].idle_since_s for i in active]
         self.finished = (
             len(self.team_map) > 0
             and all(s is not None for s in idle_since)
@@ -383,6 +414,8 @@ class Server:
         else:
             planned = [self._dwa_command(i, states, goals, field) for i in range(len(states))]
         commands = [overrides.get(i, (float(v), float(w))) for i, (v, w) in enumerate(planned)]
+        for i in self.lost:
+            commands[i] = (0.0, 0.0)
         for i, task in enumerate(self.tasks):
             task.velocity = commands[i]
         return commands

@@ -1,0 +1,2 @@
+"""Robots and server as separate processes over Zenoh (``acslam serve``, ``acslam robot``,
+``acslam run --distributed``)."""

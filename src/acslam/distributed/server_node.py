@@ -1,0 +1,157 @@
+"""``acslam serve``: the server in wall-clock time, talking to robots over Zenoh.
+
+Each control period the server steps on whatever arrived since the last one (late
+messages are simply used late), sends commands and publishes its status. It starts once
+every robot has sent a heartbeat, at the pose the heartbeat reports: the start pose on a
+fresh run, the robot's own dead-reckoned pose after a server restart (there is no
+persisted state; the restarted server maps afresh from there). A robot whose heartbeats
+stop for ``heartbeat_timeout_s`` is marked lost (:meth:`Server.mark_lost`) and ignored
+from then on.
+
+The run folder is written like an in-process run's (:func:`acslam.runner.finish_run`);
+ground truth comes from the robots' truth side channel, which only this evaluation
+reads, never the :class:`~acslam.server.Server`. Times are seconds since the server
+started; robot stamps are the robots' own simulated clocks, which start when they first
+hear the server, so the two agree to a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from acslam.errors import AcslamError
+from acslam.messages import RobotMessage
+from acslam.runner import ExploredHistory, TruthLog, finish_run, resolved_config, robot_name
+from acslam.scenario import Scenario
+from acslam.server import Server, ServerStatus
+from acslam.transport.codec import StatusBeacon, TruthBatch
+from acslam.transport.zenoh_link import ZenohServerEndpoint, open_session
+
+FINAL_STATUS_REPEATS = 5
+
+
+@dataclass(frozen=True)
+class ServeOptions:
+    """Timing of the server node (wall-clock seconds)."""
+
+    heartbeat_timeout_s: float = 2.0
+    startup_timeout_s: float = 60.0
+
+
+def serve(
+    scenario: Scenario,
+    listen: str,
+    out_dir: Path,
+    max_time_s: float,
+    options: ServeOptions | None = None,
+    on_progress: Callable[[ServerStatus, float], None] | None = None,
+    on_step: Callable[[Server, float, list[RobotMessage]], None] | None = None,
+) -> dict:
+    """Serve robots on ``listen`` until explored, all lost, or ``max_time_s``; returns
+    the metrics written to ``out_dir``."""
+    options = options or ServeOptions()
+    session = open_session(listen=listen)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
+    count = scenario.robot_count
+    try:
+        endpoint = ZenohServerEndpoint(session, count)
+        starts, missing = _wait_for_robots(endpoint, scenario, options.startup_timeout_s)
+        server = Server(scenario.config, starts, scenario.world.spec)
+        for robot in missing:
+            server.mark_lost(robot, 0.0)
+            endpoint.ignore(robot)
+        history = ExploredHistory(server, scenario.world.spec, on_progress)
+        endpoint.reset_stats()
+        period_s = scenario.config.algorithms.planning.control_period_s
+        reason, now_s, started = "time limit", 0.0, time.monotonic()
+        try:
+            while now_s < max_time_s:
+                _mark_silent_robots_lost(endpoint, server, options.heartbeat_timeout_s, now_s)
+                if len(server.lost) == count:
+                    reason = "all robots lost"
+                    break
+                messages = endpoint.receive()
+                endpoint.send(server.step(messages, now_s))
+                endpoint.publish_status(StatusBeacon(now_s, server.finished, tuple(server.lost)))
+                if on_step is not None:
+                    on_step(server, now_s, messages)
+                if server.finished:
+                    reason = "explored"
+                    break
+                history.sample(now_s)
+                elapsed = time.monotonic() - started
+                time.sleep(max(0.0, period_s * math.floor(elapsed / period_s + 1) - elapsed))
+                now_s = time.monotonic() - started
+        except AcslamError as exc:
+            reason = f"error: {exc}"
+        except Exception as exc:  # the run's products must survive any failure
+            reason = f"error: {type(exc).__name__}: {exc}"
+            (out_dir / "error.txt").write_text(traceback.format_exc())
+        wall_time_s = time.monotonic() - started
+        for _ in range(FINAL_STATUS_REPEATS):
+            endpoint.publish_status(StatusBeacon(now_s, True, tuple(server.lost)))
+            time.sleep(0.1)
+        truth = _truth_log(endpoint.truth(), scenario)
+        extra = {
+            "distributed": {
+                "lost_robots": {robot_name(i): t for i, t in sorted(server.lost.items())},
+                "transport": endpoint.stats_summary(),
+            }
+        }
+        return finish_run(
+            out_dir, scenario, server, truth, history.history, reason, wall_time_s, now_s, extra
+        )
+    finally:
+        session.close()
+
+
+def _wait_for_robots(
+    endpoint: ZenohServerEndpoint, scenario: Scenario, timeout_s: float
+) -> tuple[np.ndarray, list[int]]:
+    """Start poses from every robot's first heartbeat; robots not heard in time are
+    missing (they start lost, at their scenario start)."""
+    deadline = time.monotonic() + timeout_s
+    heard = endpoint.heartbeats()
+    while len(heard) < scenario.robot_count and time.monotonic() < deadline:
+        time.sleep(0.05)
+        heard = endpoint.heartbeats()
+    starts = scenario.starts.copy()
+    for robot, (_, beat) in heard.items():
+        starts[robot] = beat.pose
+    return starts, [i for i in range(scenario.robot_count) if i not in heard]
+
+
+def _mark_silent_robots_lost(
+    endpoint: ZenohServerEndpoint, server: Server, timeout_s: float, now_s: float
+) -> None:
+    wall = time.monotonic()
+    for robot, (heard_s, _) in endpoint.heartbeats().items():
+        if robot not in server.lost and wall - heard_s > timeout_s:
+            server.mark_lost(robot, now_s)
+            endpoint.ignore(robot)
+
+
+def _truth_log(batches: dict[int, list[TruthBatch]], scenario: Scenario) -> TruthLog:
+    """Each robot's true trajectory as received on the truth channel, in stamp order; a
+    robot never heard stays at its start."""
+    trajectories, collisions = [], np.zeros((scenario.robot_count, 2), dtype=np.int64)
+    for robot in range(scenario.robot_count):
+        received = batches.get(robot, [])
+        if not received:
+            trajectories.append(np.array([[0.0, *scenario.starts[robot]]]))
+            continue
+        rows = np.vstack([np.column_stack([b.stamps, b.poses]) for b in received])
+        _, unique = np.unique(rows[:, 0], return_index=True)
+        trajectories.append(rows[unique])
+        collisions[robot] = received[-1].collisions
+    return TruthLog(trajectories, collisions)
