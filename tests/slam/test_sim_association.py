@@ -132,7 +132,7 @@ def _run(outlier_fraction: float, seed: int = 3) -> dict:
 
 
 def test_three_robot_loops_beat_dead_reckoning_five_fold() -> None:
-    """Issue acceptance: position RMSE <= 0.05 m and <= 1/5 of dead reckoning's."""
+    """Position RMSE <= 0.05 m and <= 1/5 of dead reckoning's, precision >= 0.95."""
     run = _run(0.0)
     print(run)
     assert run["rmse"] <= 0.05, run
