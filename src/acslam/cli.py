@@ -324,8 +324,18 @@ def slam_group() -> None:
     default=None,
     help="Use only the first SECONDS of the recording [default: all of it].",
 )
+@click.option(
+    "--inter-robot/--no-inter-robot",
+    default=True,
+    show_default=True,
+    help="Add a factor between two robots' poses when one sees the other's barcode.",
+)
 def slam_mrclam_command(
-    path: Path, out_dir: Path, known_association: bool, max_time_s: float | None
+    path: Path,
+    out_dir: Path,
+    known_association: bool,
+    max_time_s: float | None,
+    inter_robot: bool,
 ) -> None:
     """Localize the 5 robots of a UTIAS MRCLAM dataset in one factor graph and score it.
 
@@ -334,7 +344,13 @@ def slam_mrclam_command(
     """
     from acslam.slam.mrclam_eval import run_mrclam
 
-    metrics = run_mrclam(path, out_dir, known_association=known_association, max_time_s=max_time_s)
+    metrics = run_mrclam(
+        path,
+        out_dir,
+        known_association=known_association,
+        max_time_s=max_time_s,
+        inter_robot=inter_robot,
+    )
     overall = metrics["overall"]
     click.echo(
         f"position RMSE {overall['slam']['position_rmse_m']:.3f} m (dead reckoning "

@@ -149,6 +149,39 @@ def test_shared_landmarks_correct_another_robots_drift() -> None:
     np.testing.assert_allclose(backend.trajectory(0)[1][0], np.zeros(3), atol=0.02)
 
 
+def test_seeing_another_robot_corrects_its_drift() -> None:
+    """Robot 0 stands at its known start; robot 1's odometry under-reads distance by 10 %
+    over 3 m. Robot 0 then measures robot 1 (exact point), with robot 1 0.18 m past its
+    latest keyframe, so the offset path is used: robot 1's pose snaps back.
+
+    Config as in the landmark case above: odometry sigma 10 % of distance and a 2 cm
+    camera, so the sighting is ~5x more certain than robot 1's odometry chain and the MAP
+    moves it almost fully (a few cm left), while robot 0 (prior-pinned) stays put.
+    """
+    config = SlamConfig(odom_sigma_xy_per_m=0.1, landmark_sigma_m=0.02)
+    truth1 = np.array([0.5, 1.0, 0.0])
+    backend = SlamBackend(config, {0: np.zeros(3), 1: truth1})
+    for k in range(1, 31):  # 3 m at 0.1 m per step, 0.09 m measured
+        truth1 = compose(truth1, np.array([0.1, 0.0, 0.0]))
+        backend.add_odometry(OdometryIncrement(1, k * DT, (k - 1) * DT, 0.09, 0.0, 0.0))
+        if k % 5 == 0:
+            backend.update()
+    before = backend.latest_pose(1)
+    assert before[0] - truth1[0] == pytest.approx(-0.3, abs=1e-9)
+    assert backend.keyframe_count(1) == 8  # a keyframe every 4 steps: 0.18 m past the last
+    assert backend.add_robot_observation(0, 1, 3.05, np.array([*truth1[:2], 0.0]))
+    assert backend.robot_observations == 1
+    backend.update(extra_iterations=4)  # Huber reweighting needs a few Gauss-Newton steps
+    after = backend.latest_pose(1)
+    assert np.hypot(*(after - truth1)[:2]) < 0.05
+    np.testing.assert_allclose(backend.latest_pose(0), np.zeros(3), atol=0.01)
+    # Out of order from the same observer: skipped and counted; unknown robots are errors.
+    assert not backend.add_robot_observation(0, 1, 3.0, np.array([3.5, 1.0, 0.0]))
+    assert backend.skipped_messages["robots"] == 1
+    with pytest.raises(SlamError, match="robot 7"):
+        backend.add_robot_observation(0, 7, 4.0, np.array([1.0, 0.0, 0.0]))
+
+
 def test_keyframes_grow_with_distance_not_time() -> None:
     backend = SlamBackend(SlamConfig(keyframe_distance_m=0.3), {0: np.zeros(3)})
     for k in range(1, 1001):  # 100 s standing still, observing

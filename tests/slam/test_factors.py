@@ -17,6 +17,7 @@ from acslam.slam.factors import (
     planar_compose_jacobians,
     planar_to_pose3,
     pose3_to_planar,
+    robot_observation_factor,
 )
 
 POSE = keys.pose_key(3, 7)
@@ -65,6 +66,70 @@ def test_observation_jacobians_match_central_differences(seed: int) -> None:
     )
     np.testing.assert_allclose(h_pose, num_pose, atol=1e-6)
     np.testing.assert_allclose(h_point, num_point, atol=1e-6)
+
+
+OBSERVED = keys.pose_key(4, 2)
+
+
+def _robot_error(factor: gtsam.CustomFactor, pose_a: gtsam.Pose3, pose_b: gtsam.Pose3):
+    values = gtsam.Values()
+    values.insert(POSE, pose_a)
+    values.insert(OBSERVED, pose_b)
+    return np.asarray(factor.unwhitenedError(values))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_robot_observation_jacobians_match_central_differences(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pose_a, pose_b = _random_pose(rng), _random_pose(rng)
+    factor = robot_observation_factor(
+        POSE, OBSERVED, rng.normal(size=3), rng.normal(size=3), gtsam.noiseModel.Unit.Create(3)
+    )
+    values = gtsam.Values()
+    values.insert(POSE, pose_a)
+    values.insert(OBSERVED, pose_b)
+    linear = factor.linearize(values)
+    h_a, h_b = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
+    eps = 1e-6
+    num_a = np.column_stack(
+        [
+            (
+                _robot_error(factor, pose_a.retract(eps * e), pose_b)
+                - _robot_error(factor, pose_a.retract(-eps * e), pose_b)
+            )
+            / (2 * eps)
+            for e in np.eye(6)
+        ]
+    )
+    num_b = np.column_stack(
+        [
+            (
+                _robot_error(factor, pose_a, pose_b.retract(eps * e))
+                - _robot_error(factor, pose_a, pose_b.retract(-eps * e))
+            )
+            / (2 * eps)
+            for e in np.eye(6)
+        ]
+    )
+    np.testing.assert_allclose(h_a, num_a, atol=1e-6)
+    np.testing.assert_allclose(h_b, num_b, atol=1e-6)
+
+
+def test_robot_observation_error_of_a_known_configuration() -> None:
+    # Observer at the origin facing +x; the observed keyframe at (2, 1) facing +y, and the
+    # observed robot 0.5 m ahead of that keyframe: at (2, 1.5) -> measured (1.9, 1.6, 0)
+    # gives e = (0.1, -0.1, 0).
+    factor = robot_observation_factor(
+        POSE,
+        OBSERVED,
+        np.array([1.9, 1.6, 0.0]),
+        np.array([0.5, 0.0, 0.0]),
+        gtsam.noiseModel.Unit.Create(3),
+    )
+    error = _robot_error(
+        factor, planar_to_pose3(np.zeros(3)), planar_to_pose3(np.array([2.0, 1.0, np.pi / 2]))
+    )
+    np.testing.assert_allclose(error, [0.1, -0.1, 0.0], atol=1e-12)
 
 
 def test_observation_error_of_a_known_configuration() -> None:

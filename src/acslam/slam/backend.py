@@ -2,7 +2,8 @@
 
 Graph (thesis eqs. 4.17-4.20): a prior on each robot's known start pose, SE(3) odometry
 between-factors between consecutive keyframes, and Huber-robust landmark observation
-factors, softly associated by PDA (eqs. 4.21-4.24) to landmarks shared by all robots.
+factors, softly associated by PDA (eqs. 4.21-4.24) to landmarks shared by all robots,
+and Huber-robust factors between two robots' keyframes when one robot sees another.
 
 Keyframes: a robot gets a new pose variable only when the odometry accumulated since its
 last keyframe exceeds ``keyframe_distance_m`` of path or ``keyframe_angle_rad`` of turn,
@@ -49,6 +50,7 @@ from acslam.slam.factors import (
     planar_to_pose3,
     pose3_to_planar,
     prior_noise,
+    robot_observation_factor,
     sensor_covariance,
 )
 
@@ -139,6 +141,7 @@ class SlamBackend:
         self._scans_by_keyframe: dict[int, list[int]] = {}
         self._moved: list[tuple[int, int]] = []
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
+        self.robot_observations = 0
         self.update_durations_s: list[float] = []
         self.dropped_ambiguous = 0
         self.tentative_observations = 0
@@ -160,7 +163,7 @@ class SlamBackend:
         if robot is None:
             raise SlamError(f"{kind} message from robot {robot_id}, which has no start pose")
         if stamp < robot.last_stamp.get(kind, -np.inf):
-            self.skipped_messages[kind] += 1
+            self.skipped_messages[kind] = self.skipped_messages.get(kind, 0) + 1
             return None
         robot.last_stamp[kind] = stamp
         if np.isnan(robot.stamps[0]):
@@ -239,15 +242,11 @@ class SlamBackend:
     def _frame(self, robot: _Robot, points: np.ndarray) -> dict:
         """Per point: z in the latest keyframe (with its covariance), z in the world, and
         the world covariance of T z from the sensor alone and with the pose marginal."""
-        cfg = self.config
         pose_key = robot.pose_keys[-1]
         pose = self._pose_estimate(pose_key)
         rotation = pose.rotation().matrix()
         pose_cov = self._pose_covariance(robot)
-        offset = robot.offset
         offset_cov = self._offset_covariance(robot)
-        c, s = np.cos(offset[2]), np.sin(offset[2])
-        offset_rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         frame: dict = {
             "pose_key": pose_key,
             "kf": [],
@@ -257,19 +256,65 @@ class SlamBackend:
             "cov": [],
         }
         for point in points:
-            rotated = offset_rot @ point
-            point_kf = rotated + np.array([offset[0], offset[1], 0.0])
-            jac_offset = np.array(
-                [[1.0, 0.0, -rotated[1]], [0.0, 1.0, rotated[0]], [0.0, 0.0, 0.0]]
-            )
-            sensor_cov = sensor_covariance(cfg, point)
-            cov_kf = offset_rot @ sensor_cov @ offset_rot.T + jac_offset @ offset_cov @ jac_offset.T
+            point_kf, cov_kf = self._to_keyframe(robot, point, offset_cov)
             frame["kf"].append(point_kf)
             frame["cov_kf"].append(cov_kf)
             frame["world"].append(np.asarray(pose.transformFrom(point_kf)))
             frame["sensor"].append(rotation @ cov_kf @ rotation.T)
             frame["cov"].append(measurement_covariance(rotation, point_kf, cov_kf, pose_cov))
         return frame
+
+    def _to_keyframe(
+        self, robot: _Robot, point: np.ndarray, offset_cov: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A point seen now -> the robot's latest keyframe frame, with its covariance: the
+        sensor's, rotated by the offset's heading, plus the offset's odometry uncertainty."""
+        offset = robot.offset
+        c, s = np.cos(offset[2]), np.sin(offset[2])
+        offset_rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        rotated = offset_rot @ point
+        point_kf = rotated + np.array([offset[0], offset[1], 0.0])
+        jac_offset = np.array([[1.0, 0.0, -rotated[1]], [0.0, 1.0, rotated[0]], [0.0, 0.0, 0.0]])
+        sensor_cov = sensor_covariance(self.config, point)
+        cov_kf = offset_rot @ sensor_cov @ offset_rot.T + jac_offset @ offset_cov @ jac_offset.T
+        return point_kf, cov_kf
+
+    def add_robot_observation(
+        self, observer_id: int, observed_id: int, stamp: float, point: np.ndarray
+    ) -> bool:
+        """Robot ``observed_id`` seen by robot ``observer_id`` at ``point`` (observer frame).
+
+        The observed robot's identity must come from a recognition signal of its own (e.g.
+        a marker on it), so no association is needed. The factor ties both robots' latest
+        keyframes: the point enters the observer's keyframe frame as a landmark point does,
+        and the observed robot stands at the odometry offset since its own keyframe, whose
+        uncertainty is added to the covariance. Huber-robust like a landmark observation.
+        Returns whether a factor was added (False: skipped as out of order or non-finite).
+        """
+        if int(observer_id) == int(observed_id):
+            raise ValueError(f"robot {observer_id} cannot observe itself")
+        observed = self._robots.get(int(observed_id))
+        if observed is None:
+            raise SlamError(f"observation of robot {observed_id}, which has no start pose")
+        point = np.asarray(point, dtype=float).reshape(3)
+        robot = self._accept("robots", observer_id, stamp)
+        if robot is None:
+            return False
+        if not np.isfinite(point).all():
+            self.skipped_messages["robot_points"] = self.skipped_messages.get("robot_points", 0) + 1
+            return False
+        point_kf, cov_kf = self._to_keyframe(robot, point, self._offset_covariance(robot))
+        target_var = self._offset_covariance(observed)[0, 0]
+        cov_kf = cov_kf + np.diag([target_var, target_var, 0.0])
+        noise = observation_noise(cov_kf, 1.0, self.config.huber_k)
+        target = np.array([observed.offset[0], observed.offset[1], 0.0])
+        self._graph.add(
+            robot_observation_factor(
+                robot.pose_keys[-1], observed.pose_keys[-1], point_kf, target, noise
+            )
+        )
+        self.robot_observations += 1
+        return True
 
     def _add_factor(self, pose_key: int, index: int, point_kf, cov_kf, probability: float) -> None:
         noise = observation_noise(cov_kf, probability, self.config.huber_k)

@@ -120,6 +120,53 @@ def observation_factor(
     )
 
 
+def _robot_observation_error(
+    measured: np.ndarray,
+    target: np.ndarray,
+    this: gtsam.CustomFactor,
+    values: gtsam.Values,
+    jacobians: list[np.ndarray] | None,
+) -> np.ndarray:
+    """e = T_a^-1 (T_b p) - z: robot b's point ``p`` (its own frame) predicted in a's frame.
+
+    ``p`` is where robot b was, relative to its keyframe, when robot a measured it (the
+    odometry since that keyframe), so both robots' keyframes take the correction. The
+    Jacobians chain Pose3.transformFrom and Pose3.transformTo in GTSAM's own chart.
+    """
+    keys = this.keys()
+    pose_a = values.atPose3(keys[0])
+    pose_b = values.atPose3(keys[1])
+    if jacobians is None:
+        return pose_a.transformTo(pose_b.transformFrom(target)) - measured
+    h_b = np.zeros((3, 6), order="F")
+    h_target = np.zeros((3, 3), order="F")
+    world = pose_b.transformFrom(target, h_b, h_target)
+    h_a = np.zeros((3, 6), order="F")
+    h_world = np.zeros((3, 3), order="F")
+    predicted = pose_a.transformTo(world, h_a, h_world)
+    jacobians[0] = h_a
+    jacobians[1] = h_world @ h_b
+    return predicted - measured
+
+
+def robot_observation_factor(
+    observer_key: int,
+    observed_key: int,
+    measured: np.ndarray,
+    target: np.ndarray,
+    noise: gtsam.noiseModel.Base,
+) -> gtsam.CustomFactor:
+    """Robot ``observed_key`` seen from ``observer_key`` at ``measured`` (3D point in the
+    observer's frame); ``target`` is the seen point in the observed pose's own frame."""
+    measured = np.asarray(measured, dtype=float).reshape(3)
+    target = np.asarray(target, dtype=float).reshape(3)
+    return gtsam.CustomFactor(
+        noise,
+        [observer_key, observed_key],
+        partial(_robot_observation_error, measured, target),
+    )
+
+
 def planar_compose_jacobians(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Jacobians of SE(2) ``a * b`` w.r.t. ``a`` and ``b`` (world-frame [x, y, theta])."""
     c, s = math.cos(a[2]), math.sin(a[2])
