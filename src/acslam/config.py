@@ -470,6 +470,11 @@ class ScanMatchingConfig(Section):
     line_neighbors: Annotated[int, Field(ge=3)] = 9
     line_max_extent_m: PositiveFloat = 1.0
     line_planarity_sigmas: PositiveFloat = 3.0
+    # A point's line passes through the mean of it and its line_point_neighbors - 1 nearest
+    # neighbours: more average the range noise down, but on a curved surface (trunk,
+    # pillar) their mean is offset by the sagitta, which biases matches along the way
+    # travelled. 1 is the point itself, >= line_neighbors the neighbourhood's centroid.
+    line_point_neighbors: Annotated[int, Field(ge=1)] = 5
     gate_initial_m: PositiveFloat = 1.0
     gate_min_m: PositiveFloat = 0.1
     gate_decay: Annotated[float, Field(gt=0, le=1)] = 0.7
