@@ -69,15 +69,7 @@ def run_exploration(
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
     config = scenario.config
-    sim = Simulator(
-        scenario.world,
-        scenario.starts,
-        scenario.landmarks,
-        config.robots,
-        config.sensors,
-        config.sim,
-        config.seed,
-    )
+    sim = scenario.simulator()
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
     bus = InProcessBus()

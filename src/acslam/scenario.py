@@ -15,6 +15,7 @@ import numpy as np
 from acslam.config import ScenarioConfig, load_scenario_config
 from acslam.errors import ConfigError
 from acslam.seeding import Stream, rng
+from acslam.sim.simulator import Simulator
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.world import World
@@ -39,6 +40,19 @@ class Scenario:
         """Free area a robot disc can sweep from the first start (what exploring can map)."""
         reachable = self.world.reachable_free(*self.starts[0, :2], self.config.robots.radius_m)
         return float(reachable.sum()) * self.world.spec.resolution_m**2
+
+    def simulator(self) -> Simulator:
+        """A fresh simulator of this scenario: its world, team, sensors and seed."""
+        config = self.config
+        return Simulator(
+            self.world,
+            self.starts,
+            self.landmarks,
+            config.robots,
+            config.sensors,
+            config.sim,
+            config.seed,
+        )
 
     def with_algorithms(
         self, local_planner: str | None = None, allocation_method: str | None = None

@@ -7,21 +7,12 @@ from pathlib import Path
 
 from acslam.scenario import load_scenario
 from acslam.server import Server
-from acslam.sim.simulator import Simulator
 
 
 def test_lost_robot_is_dropped_from_allocation_and_finish(tiny_scenario: Path) -> None:
     scenario = load_scenario(tiny_scenario)
     config = scenario.config
-    sim = Simulator(
-        scenario.world,
-        scenario.starts,
-        scenario.landmarks,
-        config.robots,
-        config.sensors,
-        config.sim,
-        config.seed,
-    )
+    sim = scenario.simulator()
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = round(config.algorithms.planning.control_period_s / config.sim.dt_s)
     messages: list = []

@@ -58,15 +58,7 @@ def run_robot(
             f"--id: robot {robot_id} does not exist, the team has {scenario.robot_count}"
         )
     config = scenario.config
-    sim = Simulator(
-        scenario.world,
-        scenario.starts,
-        scenario.landmarks,
-        config.robots,
-        config.sensors,
-        config.sim,
-        config.seed,
-    )
+    sim = scenario.simulator()
     fault_rng = np.random.default_rng(
         np.random.SeedSequence(entropy=config.seed, spawn_key=(_FAULT_STREAM, robot_id))
     )
