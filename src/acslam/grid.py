@@ -35,6 +35,16 @@ class GridSpec:
     def height_m(self) -> float:
         return self.rows * self.resolution_m
 
+    @property
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """(left, right, bottom, top) in metres, as matplotlib's ``imshow(extent=...)``."""
+        return (
+            self.origin_x_m,
+            self.origin_x_m + self.width_m,
+            self.origin_y_m,
+            self.origin_y_m + self.height_m,
+        )
+
     def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) world points -> (N, 2) integer ``[row, col]`` (may lie outside the grid)."""
         xy = np.atleast_2d(np.asarray(xy, dtype=float))

@@ -97,15 +97,6 @@ class RunRecord:
 # --------------------------------------------------------------------------- figures
 
 
-def _extent(spec: GridSpec) -> tuple[float, float, float, float]:
-    return (
-        spec.origin_x_m,
-        spec.origin_x_m + spec.width_m,
-        spec.origin_y_m,
-        spec.origin_y_m + spec.height_m,
-    )
-
-
 def _zoom(ax: plt.Axes, record: RunRecord, margin_m: float = 1.0) -> None:
     """Frame the reachable area (the 40 m grids are mostly wall)."""
     rows, cols = np.nonzero(record.reachable | (record.estimated_values != -1))
@@ -145,7 +136,7 @@ def figure_trajectories(record: RunRecord, path: Path) -> None:
         ~record.true_occupied,
         cmap="gray",
         origin="lower",
-        extent=_extent(record.spec),
+        extent=record.spec.extent_m,
         vmin=0,
         vmax=1,
         interpolation="nearest",
@@ -183,7 +174,7 @@ def figure_map(values: np.ndarray, record: RunRecord, path: Path, title: str) ->
         _map_image(values),
         cmap="gray",
         origin="lower",
-        extent=_extent(record.spec),
+        extent=record.spec.extent_m,
         vmin=0,
         vmax=1,
         interpolation="nearest",
@@ -211,7 +202,7 @@ def figure_confusion(record: RunRecord, path: Path) -> None:
     ax.imshow(
         confusion_image(record.true_occupied, record.estimated_values),
         origin="lower",
-        extent=_extent(record.spec),
+        extent=record.spec.extent_m,
         interpolation="nearest",
     )
     _zoom(ax, record)

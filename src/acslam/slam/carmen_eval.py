@@ -166,24 +166,21 @@ def _grid_image(values: np.ndarray) -> np.ndarray:
     return np.select([values == 100, values == 0], [0.0, 1.0], default=0.75)
 
 
-def _extent(spec: GridSpec) -> tuple[float, float, float, float]:
-    return (
-        spec.origin_x_m,
-        spec.origin_x_m + spec.width_m,
-        spec.origin_y_m,
-        spec.origin_y_m + spec.height_m,
+def _draw_map(
+    ax: plt.Axes, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
+) -> None:
+    ax.imshow(
+        _grid_image(values), cmap="gray", origin="lower", extent=spec.extent_m, vmin=0, vmax=1
     )
+    ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
+    ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
 
 
 def _plot_map(
     path: Path, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
 ) -> None:
     fig, ax = plt.subplots(figsize=(9, 9))
-    ax.imshow(
-        _grid_image(values), cmap="gray", origin="lower", extent=_extent(spec), vmin=0, vmax=1
-    )
-    ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
-    ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
+    _draw_map(ax, values, spec, track, title)
     fig.savefig(path, dpi=200, bbox_inches="tight")
     plt.close(fig)
 
@@ -193,12 +190,8 @@ def _plot_comparison(
     panels: list[tuple[np.ndarray, GridSpec, np.ndarray, str]],
 ) -> None:
     fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
-    for ax, (values, spec, track, title) in zip(axes, panels, strict=True):
-        ax.imshow(
-            _grid_image(values), cmap="gray", origin="lower", extent=_extent(spec), vmin=0, vmax=1
-        )
-        ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
-        ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
+    for ax, panel in zip(axes, panels, strict=True):
+        _draw_map(ax, *panel)
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
 
