@@ -89,16 +89,22 @@ def run_exploration(
                 for message in sim.step(bus.receive_commands()):
                     bus.publish(message)
             progress.sample(sim.time_s)
-    except AcslamError as exc:
-        reason = f"error: {exc}"
     except Exception as exc:  # the run's products must survive any failure
-        reason = f"error: {type(exc).__name__}: {exc}"
-        (out_dir / "error.txt").write_text(traceback.format_exc())
+        reason = failure_reason(exc, out_dir)
     wall_time_s = time.perf_counter() - started
     truth = TruthLog.of_simulator(sim)
     return finish_run(
         out_dir, scenario, server, truth, progress.history, reason, wall_time_s, sim.time_s
     )
+
+
+def failure_reason(exc: Exception, out_dir: Path) -> str:
+    """The ``reason`` of a run stopped by ``exc``: an AcslamError names the problem itself;
+    anything else is a bug, so its traceback goes to ``out_dir/error.txt``."""
+    if isinstance(exc, AcslamError):
+        return f"error: {exc}"
+    (out_dir / "error.txt").write_text(traceback.format_exc())
+    return f"error: {type(exc).__name__}: {exc}"
 
 
 class ExploredHistory:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import time
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +26,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from acslam.errors import AcslamError
 from acslam.messages import RobotMessage
-from acslam.runner import ExploredHistory, TruthLog, finish_run, resolved_config, robot_name
+from acslam.runner import (
+    ExploredHistory,
+    TruthLog,
+    failure_reason,
+    finish_run,
+    resolved_config,
+    robot_name,
+)
 from acslam.scenario import Scenario
 from acslam.server import Server, ServerStatus
 from acslam.transport.codec import StatusBeacon, TruthBatch
@@ -92,11 +97,8 @@ def serve(
                 elapsed = time.monotonic() - started
                 time.sleep(max(0.0, period_s * math.floor(elapsed / period_s + 1) - elapsed))
                 now_s = time.monotonic() - started
-        except AcslamError as exc:
-            reason = f"error: {exc}"
         except Exception as exc:  # the run's products must survive any failure
-            reason = f"error: {type(exc).__name__}: {exc}"
-            (out_dir / "error.txt").write_text(traceback.format_exc())
+            reason = failure_reason(exc, out_dir)
         wall_time_s = time.monotonic() - started
         for _ in range(FINAL_STATUS_REPEATS):
             endpoint.publish_status(StatusBeacon(now_s, True, tuple(server.lost)))
