@@ -282,7 +282,9 @@ class SlamConfig(Section):
     isam_relinearize_threshold: PositiveFloat = 0.05
     isam_relinearize_skip: Annotated[int, Field(ge=1)] = 10
     isam_factorization: Literal["CHOLESKY", "QR"] = "CHOLESKY"
-    correction_threshold_m: PositiveFloat = 0.05
+    # A keyframe this far from where it was last reported moved is reported again (the
+    # map re-places its scans): half a 5 cm cell, so the map never lags by more.
+    correction_threshold_m: PositiveFloat = 0.025
 
 
 class MappingConfig(Section):
@@ -304,6 +306,14 @@ class MappingConfig(Section):
     # clears free space up to it, with no occupied update.
     max_range_m: PositiveFloat = 8.0
     free_on_no_return: bool = True
+    # For thin structures (see LogOddsGrid): a return beyond hit_max_range_m (None: all
+    # up to max_range_m) clears free space up to far_free_margin_m short of it and marks
+    # nothing occupied (the LDS-02's sigma is 6.5 cm, 1.3 cells, at 4 m; the margin is
+    # 2 sigma at 8 m), and the hit kernel leaves out the cells beyond the endpoint unless
+    # kernel_beyond_hit.
+    hit_max_range_m: PositiveFloat | None = None
+    far_free_margin_m: NonNegativeFloat = 0.25
+    kernel_beyond_hit: bool = True
 
     @model_validator(mode="after")
     def _bounds(self) -> MappingConfig:
@@ -448,7 +458,7 @@ class ServerConfig(Section):
 
 
 class ScanMatchingConfig(Section):
-    """LiDAR scan matching: point-to-line ICP, its covariance, verification, loop closures.
+    """LiDAR scan matching: point-to-surface ICP, its covariance, verification, loop closures.
 
     The noise model defaults to :class:`LidarConfig`'s (the simulated LDS-02); for another
     sensor state its figures (a SICK LMS is ~0.01 m, no relative term). It weights each
@@ -464,17 +474,14 @@ class ScanMatchingConfig(Section):
     angle_noise_std_rad: NonNegativeFloat = 0.002
     # Residual sigmas never go below this (a noise-free model would divide by zero).
     min_sigma_m: PositiveFloat = 1e-4
-    # Reference lines: PCA of each point's k nearest neighbours within line_max_extent_m;
-    # a line whose thickness exceeds line_planarity_sigmas predicted sigmas (a corner, an
-    # edge, clutter) is not used.
+    # Reference surfaces: PCA line of each point's k nearest neighbours within
+    # line_max_extent_m, refined by a parabola (or, surface_fit "line", a line) fitted to
+    # the same k; a neighbourhood whose PCA thickness exceeds line_planarity_sigmas
+    # predicted sigmas (a corner, an edge, clutter) is not used.
     line_neighbors: Annotated[int, Field(ge=3)] = 9
     line_max_extent_m: PositiveFloat = 1.0
     line_planarity_sigmas: PositiveFloat = 3.0
-    # A point's line passes through the mean of it and its line_point_neighbors - 1 nearest
-    # neighbours: more average the range noise down, but on a curved surface (trunk,
-    # pillar) their mean is offset by the sagitta, which biases matches along the way
-    # travelled. 1 is the point itself, >= line_neighbors the neighbourhood's centroid.
-    line_point_neighbors: Annotated[int, Field(ge=1)] = 5
+    surface_fit: Literal["parabola", "line"] = "parabola"
     gate_initial_m: PositiveFloat = 1.0
     gate_min_m: PositiveFloat = 0.1
     gate_decay: Annotated[float, Field(gt=0, le=1)] = 0.7
@@ -501,6 +508,9 @@ class ScanMatchingConfig(Section):
     max_sigma_m: PositiveFloat = 0.05
     max_sigma_rad: PositiveFloat = 0.02
     max_condition: Annotated[float, Field(ge=1)] = 25.0
+    # Besides the previous keyframe, each keyframe is matched to the latest one at least
+    # this far back along the robot's path (0: not at all), see lidar_constraints.
+    sequential_baseline_m: NonNegativeFloat = 1.0
     # Loop-closure candidates: keyframes closer than this, and (same robot) further apart
     # in time than loop_min_separation_s so neighbours in the chain are not re-matched.
     loop_radius_m: PositiveFloat = 2.0

@@ -84,6 +84,42 @@ def test_no_return_beams_never_mark_occupied(free_on_no_return: bool) -> None:
     assert np.hypot(centres[:, 0], centres[:, 1]).max() <= 3.0 + grid.spec.resolution_m
 
 
+def test_far_returns_clear_short_of_the_return_and_mark_nothing() -> None:
+    cfg = MappingConfig(hit_max_range_m=2.0, far_free_margin_m=0.23)
+    grid = LogOddsGrid(GridSpec(-5.0, -5.0, 0.05, 200, 200), cfg)
+    got = _increments_by_cell(grid, [3.0, 1.0], [0.0, math.pi / 2], [0.0, 0.0, 0.0])
+    along_x = sorted(c for (r, c), v in got.items() if r == 100 and c >= 100)
+    # Cells 100 .. 154 cover x in [0, 2.75): the beam clears up to 3.0 - 0.23 = 2.77 m,
+    # its last cell (the end point's, x in [2.75, 2.80)) excluded as for any beam.
+    assert along_x == list(range(100, 155))
+    assert all(got[(100, c)] < 0 for c in along_x)
+    positive = np.array([cell for cell, v in got.items() if v > 0])
+    assert np.allclose(grid.spec.cell_to_world(positive)[:, 1], 1.025, atol=0.101)
+
+
+def _deepest_occupied_update_cells(config: MappingConfig) -> float:
+    """Largest offset along the beam, in cells, of a cell with an occupied update beyond
+    the endpoint's cell, over 2 m beams at 7 angles."""
+    grid = LogOddsGrid(GridSpec(-5.0, -5.0, 0.05, 200, 200), config)
+    deepest = -math.inf
+    for angle in np.linspace(-np.pi / 3, np.pi / 3, 7):
+        sensor = np.array([-2.0 * math.cos(angle), -2.0 * math.sin(angle), angle])
+        got = _increments_by_cell(grid, [2.0], [0.0], sensor)
+        end = grid.spec.world_to_cell(
+            np.array([[0.025 * math.cos(angle), 0.025 * math.sin(angle)]])
+        )[0]
+        direction = np.array([math.sin(angle), math.cos(angle)])  # (row, col) of the beam
+        for (row, col), value in got.items():
+            if value > 0:
+                deepest = max(deepest, float((np.array([row, col]) - end) @ direction))
+    return deepest
+
+
+def test_hit_kernel_can_stay_on_the_sensor_side_of_the_endpoint() -> None:
+    assert _deepest_occupied_update_cells(MappingConfig()) >= 1.0  # eq. 4.34: all round
+    assert _deepest_occupied_update_cells(MappingConfig(kernel_beyond_hit=False)) <= 1e-9
+
+
 def test_beams_beyond_max_range_only_clear() -> None:
     grid = LogOddsGrid(GridSpec(-5.0, -5.0, 0.05, 200, 200), MappingConfig(max_range_m=2.0))
     got = _increments_by_cell(grid, [3.0, 1.0], [0.0, math.pi / 2], [0.0, 0.0, 0.0])

@@ -10,6 +10,7 @@ from simtest_worlds import RES_M, box_world
 from acslam.config import LidarConfig
 from acslam.grid import GridSpec
 from acslam.sim.lidar import LidarSensor, beam_angles, grid_ray_m
+from acslam.worlds.vineyard import stamp_discs
 from acslam.worlds.world import World
 
 NOISELESS = {"range_noise_std_m": 0.0, "range_noise_rel": 0.0, "angle_noise_std_rad": 0.0}
@@ -75,6 +76,27 @@ def test_other_robot_is_seen_and_own_disc_is_not() -> None:
     assert abs(scan.ranges[forward] - (2.0 - radius)) < 1e-6
     backward = int(np.argmin(np.abs(np.abs(scan.angles) - math.pi)))
     assert abs(scan.ranges[backward] - 0.95) < 1e-9  # the wall, not robot 0's own disc
+
+
+def test_round_obstacles_are_cast_as_circles_not_their_cells() -> None:
+    box = box_world(6.0, 3.0)
+    plant = np.array([[3.0, 1.5, 0.2]])
+    stamped = box.occupied.copy()
+    stamp_discs(stamped, box.spec, plant[:, :2], 0.2)
+    world = World("plant", box.spec, stamped, discs=plant, occupied_without_discs=box.occupied)
+    sensor = LidarSensor(LidarConfig(**NOISELESS), world, np.random.default_rng(0))
+    scan = sensor.scan(0, 0.0, (1.0, 1.52, 0.0), NO_DISCS, -1)
+    for k in np.flatnonzero(np.abs(scan.angles) < 0.08):
+        a = scan.angles[k]  # exact ray-circle distance from (1.0, 1.52)
+        b = -2.0 * math.cos(a) + 0.02 * math.sin(a)
+        expected = -b - math.sqrt(b * b - (4.0 + 0.0004 - 0.04))
+        assert abs(scan.ranges[k] - expected) < 1e-9
+    # Cast against the stamped cells instead, the same beams see a staircase.
+    cells = LidarSensor(
+        LidarConfig(**NOISELESS), World("cells", box.spec, stamped), np.random.default_rng(0)
+    )
+    staircase = cells.scan(0, 0.0, (1.0, 1.52, 0.0), NO_DISCS, -1)
+    assert np.abs(staircase.ranges - scan.ranges).max() > 0.01
 
 
 def test_dda_matches_fine_sampling_in_random_grid() -> None:

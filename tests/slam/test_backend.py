@@ -10,7 +10,7 @@ import pytest
 from acslam.config import SlamConfig
 from acslam.geometry import between, compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
-from acslam.slam import SlamBackend, SlamError
+from acslam.slam import SlamBackend, SlamError, keys
 from acslam.slam.mrclam_eval import pairwise_precision_recall
 
 DT = 0.1
@@ -306,3 +306,19 @@ def test_isam2_speed_measurement_is_consistent() -> None:
     assert 0 < result["mean_ms"] <= result["buckets"][0]["max_ms"]
     assert result["landmarks"] > 10
     assert result["final_position_error_m"] < 0.2
+
+
+def test_moved_keyframes_are_measured_from_their_last_report() -> None:
+    """A keyframe creeping 3 cm per update past a 5 cm threshold is reported once its
+    total move since the last report exceeds 5 cm, not never (as per-update deltas would)."""
+    backend = SlamBackend(SlamConfig(correction_threshold_m=0.05), {0: np.zeros(3)})
+    pose_keys = np.array([keys.pose_key(0, 1), keys.pose_key(0, 2)], dtype=np.uint64)
+    creep = [[0.0, 0.0, 0.0], [0.03, 0.0, 0.0], [0.06, 0.0, 0.0], [0.09, 0.0, 0.0]]
+    reports = [backend._report_moves(pose_keys, np.array([p, [5.0, 0.0, 0.0]])) for p in creep]
+    assert reports == [[], [], [(0, 1)], []]
+    # A keyframe first seen in a later update is reported from its first position on.
+    three = np.append(pose_keys, np.uint64(keys.pose_key(0, 3)))
+    positions = np.array([[0.09, 0.0, 0.0], [5.0, 0.0, 0.0], [7.0, 0.0, 0.0]])
+    assert backend._report_moves(three, positions) == []
+    positions[2, 1] = 0.06
+    assert backend._report_moves(three, positions) == [(0, 3)]

@@ -27,6 +27,7 @@ from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.osm import EARTH_RADIUS_M, project_lon_lat
 from acslam.worlds.thesis import WALL_M, rect_cells, thesis_layout
+from acslam.worlds.vineyard import stamp_discs
 from acslam.worlds.world import World
 
 ROBOT_RADIUS_M = 0.105
@@ -219,6 +220,18 @@ def test_vineyard_plant_count_without_gaps() -> None:
     with_gaps = vineyard(gap_probability=0.5, jitter_m=0.0, **separate)
     _, fewer = ndimage.label(field_interior(with_gaps), EIGHT)
     assert 20 < fewer < 80
+
+
+def test_vineyard_plants_are_round_obstacles_for_the_lidar() -> None:
+    world = vineyard(gap_probability=0.0, jitter_m=0.0, plant_spacing_m=0.9)
+    assert len(world.discs) == 6 * 16 and np.all(world.discs[:, 2] == 0.2)
+    plants = world.occupied & ~world.lidar_grid
+    # The grid the LiDAR casts against is the fence alone; the plants' cells are exactly
+    # their discs stamped.
+    stamped = np.zeros_like(world.occupied)
+    stamp_discs(stamped, world.spec, world.discs[:, :2], 0.2)
+    assert np.array_equal(plants, stamped & ~world.lidar_grid)
+    assert not (world.lidar_grid & stamped).any()
 
 
 def test_vineyard_starts_face_the_rows_in_the_headland() -> None:

@@ -5,7 +5,8 @@ The thesis traces beams with Bresenham lines; we use the Amanatides-Woo grid tra
 diagonally past a corner a ray clips, and skip a cell it crosses) and gives the exact
 distance to the boundary of the first occupied cell rather than a cell-quantised one.
 Other robots are discs intersected analytically, which is what "adding their shapes to
-the map" approximates.
+the map" approximates; so are a world's round obstacles (``World.discs``: plants), which
+the grid holds only as staircases of cells.
 
 Beam angles are in the robot frame (LiDAR at the robot centre, x forward): for a full
 circle, ``angle_k = -pi + k * 2 pi / beams`` (no duplicate beam at +-pi); for a narrower
@@ -181,7 +182,8 @@ class LidarSensor:
     def __init__(self, config: LidarConfig, world: World, rng: np.random.Generator) -> None:
         self.config = config
         self._rng = rng
-        self._occupied = np.ascontiguousarray(world.occupied)
+        self._occupied = np.ascontiguousarray(world.lidar_grid)
+        self._discs = np.ascontiguousarray(world.discs, dtype=np.float64)
         spec = world.spec
         self._grid = (spec.origin_x_m, spec.origin_y_m, spec.resolution_m)
         self.angles_rad = beam_angles(config)
@@ -203,8 +205,15 @@ class LidarSensor:
         discs: np.ndarray,
         skip_disc: int,
     ) -> LidarScan:
-        """A scan from ``pose``, seeing the robots ``discs`` except row ``skip_disc``."""
+        """A scan from ``pose``, seeing the robots ``discs`` except row ``skip_disc``, and
+        the world's round obstacles within range."""
         normals = self._rng.standard_normal((2, self.angles_rad.shape[0]))
+        if len(self._discs):
+            reach = self.config.range_max_m + self._discs[:, 2]
+            near = self._discs[
+                np.hypot(self._discs[:, 0] - pose[0], self._discs[:, 1] - pose[1]) <= reach
+            ]
+            discs = np.concatenate([discs.reshape(-1, 3), near])
         ranges = cast_scan(
             self._occupied,
             *self._grid,

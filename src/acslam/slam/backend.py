@@ -140,6 +140,10 @@ class SlamBackend:
         self._scans: list[tuple[LidarScan, int, np.ndarray]] = []
         self._scans_by_keyframe: dict[int, list[int]] = {}
         self._moved: list[tuple[int, int]] = []
+        # Per pose key, the position last reported (by moved_keyframes, or when first
+        # estimated): users placed the keyframe's scans there.
+        self._reported_keys = np.zeros(0, dtype=np.uint64)
+        self._reported_positions = np.zeros((0, 3))
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
         self.robot_observations = 0
         self.update_durations_s: list[float] = []
@@ -566,7 +570,6 @@ class SlamBackend:
         """
         if self._graph.size() == 0 and self._initial.size() == 0 and extra_iterations == 0:
             return
-        old_keys, old_positions = self._pose_positions(self._estimate)
         start = time.perf_counter()
         try:
             self._isam.update(self._graph, self._initial)
@@ -584,13 +587,29 @@ class SlamBackend:
         self._pending_landmark_covs.clear()
         if len(self._landmark_positions):
             self._landmark_positions = np.asarray(gtsam.utilities.extractPoint3(estimate))
-        new_keys, new_positions = self._pose_positions(estimate)
-        self._moved = []
-        if len(old_keys):
-            rows = np.searchsorted(new_keys, old_keys)
-            shift = np.linalg.norm(new_positions[rows] - old_positions, axis=1)
-            moved = old_keys[shift > self.config.correction_threshold_m]
-            self._moved = [keys.decode_pose_key(int(k)) for k in moved]
+        self._moved = self._report_moves(*self._pose_positions(estimate))
+
+    def _report_moves(self, pose_keys: np.ndarray, positions: np.ndarray) -> list[tuple[int, int]]:
+        """Keyframes now more than correction_threshold_m from where they were last
+        reported; their reported position becomes the current one.
+
+        Measured against the last *report*, not the last update: a keyframe creeping by
+        less than the threshold per update (a long loop's correction spread over many
+        updates) is still reported once its total move exceeds the threshold, so maps
+        that follow the reports never lag the estimate by more than the threshold.
+        """
+        last = positions.copy()
+        if len(self._reported_keys):
+            rows = np.searchsorted(self._reported_keys, pose_keys).clip(
+                0, len(self._reported_keys) - 1
+            )
+            reported = self._reported_keys[rows] == pose_keys
+            last[reported] = self._reported_positions[rows[reported]]
+        shift = np.linalg.norm(positions - last, axis=1)
+        moved = shift > self.config.correction_threshold_m
+        last[moved] = positions[moved]
+        self._reported_keys, self._reported_positions = pose_keys, last
+        return [keys.decode_pose_key(int(k)) for k in pose_keys[moved]]
 
     @staticmethod
     def _pose_positions(values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
@@ -665,7 +684,8 @@ class SlamBackend:
         return np.array(robot.stamps), poses
 
     def moved_keyframes(self) -> list[tuple[int, int]]:
-        """``(robot_id, index)`` of keyframes moved > correction_threshold_m by the last update."""
+        """``(robot_id, index)`` of keyframes the last update left more than
+        correction_threshold_m from where they were last reported (see _report_moves)."""
         return list(self._moved)
 
     def scan_pose(self, index: int) -> np.ndarray:

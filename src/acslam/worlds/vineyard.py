@@ -74,7 +74,9 @@ def vineyard_world(cfg: VineyardWorld, rng: np.random.Generator) -> World:
         True
     )
     occupied[r0 : r1 + 1, c0 : c1 + 1] = False
-    stamp_discs(occupied, spec, plant_positions(cfg, rng), cfg.plant_radius_m)
+    fence = occupied.copy()
+    plants = plant_positions(cfg, rng)
+    stamp_discs(occupied, spec, plants, cfg.plant_radius_m)
 
     # A column of poses in the middle of the west headland, nearest the field's centre
     # line first, keeping 0.5 m from the fence.
@@ -88,4 +90,11 @@ def vineyard_world(cfg: VineyardWorld, rng: np.random.Generator) -> World:
             np.zeros(len(offsets)),
         ]
     )
-    return World(name="vineyard", spec=spec, occupied=occupied, default_starts=starts)
+    return World(
+        name="vineyard",
+        spec=spec,
+        occupied=occupied,
+        default_starts=starts,
+        discs=np.column_stack([plants, np.full(len(plants), cfg.plant_radius_m)]),
+        occupied_without_discs=fence,
+    )
