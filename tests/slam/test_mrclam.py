@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,11 @@ from acslam.config import SlamConfig
 from acslam.datasets.mrclam import integrate_arc, read_mrclam, read_table
 from acslam.errors import DataError
 from acslam.messages import LandmarkObservations
-from acslam.slam.mrclam_eval import pairwise_precision_recall, run_mrclam
+from acslam.slam.mrclam_eval import (
+    geometric_association_ceiling,
+    pairwise_precision_recall,
+    run_mrclam,
+)
 
 DATASET = "datasets/mrclam_dataset7"
 HEADER = "# synthetic\n# for tests\n# format as MRCLAM\n# columns\n"
@@ -142,3 +147,30 @@ def test_time_going_backwards_is_skipped_and_counted(tmp_path: Path) -> None:
     seen = association["points_associated"] + association["points_tentative"]
     assert seen + association["points_dropped_ambiguous"] == 5 * 20
     assert association["points_tentative"] >= SlamConfig().landmark_confirmations - 1
+
+
+def test_geometric_association_ceiling(tmp_path: Path) -> None:
+    data = read_mrclam(_write_tiny_dataset(tmp_path / "tiny"))
+    config = SlamConfig(landmark_radial_sigma_m=0.15, landmark_angular_sigma_rad=0.01)
+    exact = geometric_association_ceiling(data, config)
+    assert exact["points"] == 5 * 20 and exact["point_accuracy"] == 1.0
+    # A decoy 0.1 m beyond the landmark along the line of sight from the robots' mean
+    # position, and 0.15 m range noise: geometry alone must now confuse them at times.
+    subject, lx, ly = LANDMARK
+    away = np.array([lx - 1.0, ly]) / np.hypot(lx - 1.0, ly)
+    decoy = np.array([lx, ly]) + 0.1 * away
+    rng = np.random.default_rng(0)
+    noisy = []
+    for msg in data.messages:
+        if isinstance(msg, LandmarkObservations):
+            scale = 1.0 + rng.normal(0.0, 0.15, (len(msg.points), 1)) / np.hypot(
+                msg.points[:, :1], msg.points[:, 1:2]
+            )
+            msg = replace(msg, points=msg.points * scale)
+        noisy.append(msg)
+    confusable = replace(
+        data, messages=noisy, landmark_truth={**data.landmark_truth, subject + 1: decoy}
+    )
+    ceiling = geometric_association_ceiling(confusable, config)
+    assert 0.5 < ceiling["point_accuracy"] < 0.9
+    assert ceiling["pairwise_recall"] < 1.0  # split between the two: recall, not precision

@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from acslam.config import SlamConfig
 from acslam.datasets.mrclam import MrclamData, read_mrclam
@@ -104,6 +105,54 @@ def pairwise_precision_recall(truth: np.ndarray, estimate: np.ndarray) -> tuple[
     both = pairs(table)
     est_pairs, true_pairs = pairs(table.sum(axis=0)), pairs(table.sum(axis=1))
     return (both / est_pairs if est_pairs else 1.0), (both / true_pairs if true_pairs else 1.0)
+
+
+def geometric_association_ceiling(data: MrclamData, config: SlamConfig) -> dict[str, float]:
+    """How well geometry alone could associate, given what no estimator has: the true
+    poses (Vicon, interpolated) and the true landmark map.
+
+    Each frame's points are assigned to the true landmarks jointly (one landmark per
+    point, least total squared range and bearing error in the configured sigmas, by the
+    Hungarian method). The scores bound what PDA can reach on this recording: where
+    landmarks stand closer together than the measurement noise, even this assignment is
+    wrong, and an estimator that must also estimate poses and landmarks does no better.
+    Scoring only: reads ground truth, never feeds the back end.
+    """
+    subjects = np.array(sorted(data.landmark_truth))
+    landmarks = np.array([data.landmark_truth[int(s)] for s in subjects])
+    sigma_r = math.hypot(config.landmark_sigma_m, config.landmark_radial_sigma_m)
+    truth, chosen = [], []
+    for n, msg in enumerate(data.messages):
+        if not isinstance(msg, LandmarkObservations):
+            continue
+        gt_t, gt = data.groundtruth[msg.robot_id]
+        pose = _interpolate(np.array([msg.stamp]), gt_t, gt, MAX_GROUNDTRUTH_GAP_S)[0]
+        point_subjects = np.asarray(data.point_subjects[n])
+        keep = np.isin(point_subjects, subjects)
+        if np.isnan(pose).any() or not keep.any():
+            continue
+        points = msg.points[keep]
+        offsets = landmarks - pose[:2]
+        true_range = np.hypot(offsets[:, 0], offsets[:, 1])
+        true_bearing = np.arctan2(offsets[:, 1], offsets[:, 0]) - pose[2]
+        ranges = np.hypot(points[:, 0], points[:, 1])
+        bearings = np.arctan2(points[:, 1], points[:, 0])
+        sigma_b = np.hypot(config.landmark_sigma_m / np.maximum(ranges, 0.1),
+                           config.landmark_angular_sigma_rad)  # fmt: skip
+        cost = ((ranges[:, None] - true_range) / sigma_r) ** 2 + (
+            wrap_angles(bearings[:, None] - true_bearing) / sigma_b[:, None]
+        ) ** 2
+        rows, cols = linear_sum_assignment(cost)
+        truth.append(point_subjects[keep][rows])
+        chosen.append(subjects[cols])
+    truth_arr, chosen_arr = np.concatenate(truth), np.concatenate(chosen)
+    precision, recall = pairwise_precision_recall(truth_arr, chosen_arr)
+    return {
+        "points": len(truth_arr),
+        "point_accuracy": float(np.mean(truth_arr == chosen_arr)),
+        "pairwise_precision": precision,
+        "pairwise_recall": recall,
+    }
 
 
 def _dead_reckoning(data: MrclamData, starts: dict[int, np.ndarray]) -> dict[int, tuple]:
@@ -238,6 +287,7 @@ def run_mrclam(
             "points_dropped_ambiguous": dropped,
             "points_tentative": tentative,
             "landmarks_tentative_expired": backend.expired_tentatives,
+            "geometric_ceiling": geometric_association_ceiling(data, config),
         },
         "updates": {
             "count": len(durations),
