@@ -308,7 +308,7 @@ class MappingConfig(Section):
     free_on_no_return: bool = True
     # For thin structures (see LogOddsGrid): a return beyond hit_max_range_m (None: all
     # up to max_range_m) clears free space up to far_free_margin_m short of it and marks
-    # nothing occupied (the LDS-02's sigma is 6.5 cm, 1.3 cells, at 4 m; the margin is
+    # nothing occupied (the LDS-02's sigma reaches a 5 cm cell at 3 m; the margin is
     # 2 sigma at 8 m), and the hit kernel leaves out the cells beyond the endpoint unless
     # kernel_beyond_hit.
     hit_max_range_m: PositiveFloat | None = None

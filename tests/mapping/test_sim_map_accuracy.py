@@ -162,8 +162,8 @@ def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
 def test_scripted_team_map_is_accurate(name: str) -> None:
     """Thesis Table 5.4 targets: accuracy >= 97 %, TPR >= 85 % over the known cells.
 
-    Measured: thesis-exp4 0.982 / 0.999, vineyard 0.971 / 0.935 (mapped at the true poses
-    the vineyard scores 0.980 / 0.996: its remaining false positives are the far side of
+    Measured: thesis-exp4 0.982 / 0.999, vineyard 0.974 / 0.924 (mapped at the true poses
+    the vineyard scores 0.982 / 0.993: its remaining false positives are the far side of
     the 10 cm fence, which no beam clears, and the rims of the round plants).
     """
     rates, scans = map_run(name, max_time_s=400.0)
