@@ -87,6 +87,15 @@ def _mappable(scan: LidarScan, pose: np.ndarray, others: np.ndarray, reach_m: fl
     return scan.angles[keep], scan.ranges[keep]
 
 
+# The vineyard's fence (10 cm) and plants are thin structures whose far side no beam
+# clears: occupied updates only up to 3 m, where the LDS-02's range sigma (5 mm + 1.5 %)
+# reaches a 5 cm cell, and the hit kernel on the sensor side (see
+# acslam.mapping.occupancy.LogOddsGrid). Not the vineyard scenario's own setting: in an
+# exploration run the walls these leave gappy stay frontiers (600 s without finishing).
+THIN_STRUCTURE_MAPPING = {"hit_max_range_m": 3.0, "kernel_beyond_hit": False}
+MAPPING = {"thesis-exp4": {}, "vineyard": THIN_STRUCTURE_MAPPING}
+
+
 def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
     """Drive the scripted routes, map, and score; returns the rates and the scans mapped."""
     scenario = load_scenario(name)
@@ -99,7 +108,7 @@ def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
     )
     slam = SlamBackend(algorithms.slam, {i: s for i, s in enumerate(starts)})
     lidar = LidarConstraints(algorithms.scan_matching)
-    team = TeamMap(world.spec, algorithms.mapping)
+    team = TeamMap(world.spec, algorithms.mapping.model_copy(update=MAPPING[name]))
     reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
     substeps = max(1, round(CONTROL_PERIOD_S / config.sim.dt_s))
     next_target = [0] * len(starts)
@@ -164,7 +173,8 @@ def test_scripted_team_map_is_accurate(name: str) -> None:
 
     Measured: thesis-exp4 0.982 / 0.999, vineyard 0.974 / 0.924 (mapped at the true poses
     the vineyard scores 0.982 / 0.993: its remaining false positives are the far side of
-    the 10 cm fence, which no beam clears, and the rims of the round plants).
+    the 10 cm fence, which no beam clears, and the rims of the round plants; with the
+    default mapping 0.947 / 0.942, the fence's far side smeared by far returns).
     """
     rates, scans = map_run(name, max_time_s=400.0)
     print(f"{name}: {scans} scans, accuracy {rates['accuracy']:.4f}, TPR {rates['tpr']:.4f}")
