@@ -114,6 +114,18 @@ def test_noisy_optimum_is_consistent_with_its_covariance() -> None:
     assert np.sqrt(np.mean(nearest**2)) < point_sigma
 
 
+def _drive_robot_1_short(backend: SlamBackend, start: np.ndarray) -> np.ndarray:
+    """Drive robot 1 3 m straight at 0.1 m per step with odometry reading 0.09 m (10 %
+    short), updating every 5 steps; returns its true final pose."""
+    truth = start
+    for k in range(1, 31):
+        truth = compose(truth, np.array([0.1, 0.0, 0.0]))
+        backend.add_odometry(OdometryIncrement(1, k * DT, (k - 1) * DT, 0.09, 0.0, 0.0))
+        if k % 5 == 0:
+            backend.update()
+    return truth
+
+
 def test_shared_landmarks_correct_another_robots_drift() -> None:
     """Robot 0 maps three landmarks from its known start; robot 1's odometry under-reads
     distance by 10 %. When robot 1 sees robot 0's landmarks, its pose snaps back.
@@ -130,11 +142,7 @@ def test_shared_landmarks_correct_another_robots_drift() -> None:
         backend.add_landmarks(LandmarkObservations(0, 0.01 * k, shared))
     backend.update()
     truth1 = np.array([-2.0, -1.5, 0.0])
-    for k in range(1, 31):  # 3 m at 0.1 m per step
-        truth1 = compose(truth1, np.array([0.1, 0.0, 0.0]))
-        backend.add_odometry(OdometryIncrement(1, k * DT, (k - 1) * DT, 0.09, 0.0, 0.0))
-        if k % 5 == 0:
-            backend.update()
+    truth1 = _drive_robot_1_short(backend, truth1)
     before = backend.latest_pose(1)
     assert before[0] - truth1[0] == pytest.approx(-0.3, abs=1e-9)
     body = shared - [truth1[0], truth1[1], 0.0]
@@ -161,11 +169,7 @@ def test_seeing_another_robot_corrects_its_drift() -> None:
     config = SlamConfig(odom_sigma_xy_per_m=0.1, landmark_sigma_m=0.02)
     truth1 = np.array([0.5, 1.0, 0.0])
     backend = SlamBackend(config, {0: np.zeros(3), 1: truth1})
-    for k in range(1, 31):  # 3 m at 0.1 m per step, 0.09 m measured
-        truth1 = compose(truth1, np.array([0.1, 0.0, 0.0]))
-        backend.add_odometry(OdometryIncrement(1, k * DT, (k - 1) * DT, 0.09, 0.0, 0.0))
-        if k % 5 == 0:
-            backend.update()
+    truth1 = _drive_robot_1_short(backend, truth1)
     before = backend.latest_pose(1)
     assert before[0] - truth1[0] == pytest.approx(-0.3, abs=1e-9)
     assert backend.keyframe_count(1) == 8  # a keyframe every 4 steps: 0.18 m past the last

@@ -35,6 +35,13 @@ def _error(factor: gtsam.CustomFactor, pose: gtsam.Pose3, point: np.ndarray) -> 
     return np.asarray(factor.unwhitenedError(values))
 
 
+def _central_differences(error_at, dim: int, eps: float = 1e-6) -> np.ndarray:
+    """(3, dim) Jacobian of ``error_at(step)`` at step = 0 by central differences."""
+    return np.column_stack(
+        [(error_at(eps * e) - error_at(-eps * e)) / (2 * eps) for e in np.eye(dim)]
+    )
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_observation_jacobians_match_central_differences(seed: int) -> None:
     rng = np.random.default_rng(seed)
@@ -46,24 +53,8 @@ def test_observation_jacobians_match_central_differences(seed: int) -> None:
     # With a unit noise model the linearised factor holds the raw Jacobians.
     linear = factor.linearize(values)
     h_pose, h_point = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
-    eps = 1e-6
-    num_pose = np.column_stack(
-        [
-            (
-                _error(factor, pose.retract(eps * e), point)
-                - _error(factor, pose.retract(-eps * e), point)
-            )
-            / (2 * eps)
-            for e in np.eye(6)
-        ]
-    )
-    num_point = np.column_stack(
-        [
-            (_error(factor, pose, point + eps * e) - _error(factor, pose, point - eps * e))
-            / (2 * eps)
-            for e in np.eye(3)
-        ]
-    )
+    num_pose = _central_differences(lambda step: _error(factor, pose.retract(step), point), 6)
+    num_point = _central_differences(lambda step: _error(factor, pose, point + step), 3)
     np.testing.assert_allclose(h_pose, num_pose, atol=1e-6)
     np.testing.assert_allclose(h_point, num_point, atol=1e-6)
 
@@ -90,27 +81,8 @@ def test_robot_observation_jacobians_match_central_differences(seed: int) -> Non
     values.insert(OBSERVED, pose_b)
     linear = factor.linearize(values)
     h_a, h_b = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
-    eps = 1e-6
-    num_a = np.column_stack(
-        [
-            (
-                _robot_error(factor, pose_a.retract(eps * e), pose_b)
-                - _robot_error(factor, pose_a.retract(-eps * e), pose_b)
-            )
-            / (2 * eps)
-            for e in np.eye(6)
-        ]
-    )
-    num_b = np.column_stack(
-        [
-            (
-                _robot_error(factor, pose_a, pose_b.retract(eps * e))
-                - _robot_error(factor, pose_a, pose_b.retract(-eps * e))
-            )
-            / (2 * eps)
-            for e in np.eye(6)
-        ]
-    )
+    num_a = _central_differences(lambda step: _robot_error(factor, pose_a.retract(step), pose_b), 6)
+    num_b = _central_differences(lambda step: _robot_error(factor, pose_a, pose_b.retract(step)), 6)
     np.testing.assert_allclose(h_a, num_a, atol=1e-6)
     np.testing.assert_allclose(h_b, num_b, atol=1e-6)
 

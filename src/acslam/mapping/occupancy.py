@@ -160,9 +160,10 @@ def _scan_update(
     for b in range(n):
         if not hit[b]:
             continue
-        a = theta_rad + angles[b]
-        ux = np.cos(a)
-        uy = np.sin(a)
+        ux = uy = 0.0
+        if not kernel_beyond_hit:
+            ux = np.cos(theta_rad + angles[b])
+            uy = np.sin(theta_rad + angles[b])
         for k in range(kernel_rows.shape[0]):
             if not kernel_beyond_hit and kernel_cols[k] * ux + kernel_rows[k] * uy > 1e-9:
                 continue  # behind the endpoint along the beam: the beam saw nothing there
