@@ -36,7 +36,7 @@ def main() -> None:
     high = poses[:, :2].max(axis=0) + MAX_RANGE_M
     config = MappingConfig(max_range_m=MAX_RANGE_M)
     spec = grid_spec_for_bounds(low[0], low[1], high[0], high[1], config.resolution_m)
-    team = TeamMap(spec, config)
+    team = TeamMap(config, spec=spec)
     start = time.perf_counter()
     for index, scan in enumerate(log.scans):
         team.add_scan(0, index, scan.ranges_m, scan.angles_rad, scan.laser_pose_xytheta)

@@ -3,14 +3,14 @@
 Three simulated robots drive overlapping circles through a landmark grid up to 3000
 keyframes in all; one back-end update per server cycle (one keyframe per robot). Prints
 mean and p95 update time per 500-keyframe bucket. The measuring code is
-:func:`acslam.slam.speed.measure_isam2_updates`, which ``acslam bench`` can call too.
+:func:`acslam.benchmarks.isam2.measure_isam2_updates`, which ``acslam bench`` can call too.
 
 Run: ``python benchmarks/isam2_speed.py [keyframes [robots [seed]]]``
 """
 
 import sys
 
-from acslam.slam.speed import measure_isam2_updates
+from acslam.benchmarks.isam2 import measure_isam2_updates
 
 
 def main() -> None:

@@ -5,7 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from acslam.grid import FREE, OCCUPIED, GridSpec
+from acslam.worlds.mapio import save_map
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED = REPO_ROOT.parent / "shared"
@@ -23,3 +27,31 @@ def shared_dataset() -> Callable[[str], Path]:
         return path
 
     return locate
+
+
+# A tiny scenario (two 5 m x 6 m rooms joined by a door) that three robots explore in
+# about 35 s.
+TINY_SCENARIO = """name: tiny
+seed: 3
+world: {generator: map_file, file: tiny.yaml}
+robots:
+  count: 3
+  starts: [[1.0, 1.5, 0.0], [1.0, 3.0, 0.0], [1.0, 4.5, 0.0]]
+  max_v_mps: 0.4
+sim: {max_time_s: 120}
+"""
+
+
+@pytest.fixture(scope="session")
+def tiny_scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("tiny")
+    occupied = np.zeros((120, 200), dtype=bool)
+    occupied[:3], occupied[-3:], occupied[:, :3], occupied[:, -3:] = True, True, True, True
+    occupied[:, 98:102] = True
+    occupied[50:70, 98:102] = False  # the 1 m door
+    occupied[20:24, 130:180] = True  # a shelf in the second room
+    cells = np.where(occupied, OCCUPIED, FREE).astype(np.int8)
+    save_map(folder / "tiny", cells, GridSpec(0.0, 0.0, 0.05, 120, 200))
+    path = folder / "scenario.yaml"
+    path.write_text(TINY_SCENARIO)
+    return path

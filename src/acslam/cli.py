@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acslam.errors import AcslamError
+from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS
 
 if TYPE_CHECKING:
     from acslam.scenario import Scenario
@@ -122,15 +123,15 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
 @seed_option
 @click.option(
     "--planner",
-    type=click.Choice(["fgp", "dwa"]),
+    type=click.Choice(LOCAL_PLANNERS.names()),
     default=None,
-    help="Local planner [default: the scenario's, fgp].",
+    help="Local planner [default: the scenario's algorithms.local_planner, fgp].",
 )
 @click.option(
     "--allocator",
-    type=click.Choice(["factor-graph", "hungarian", "greedy", "thesis"]),
+    type=click.Choice(ALLOCATORS.names()),
     default=None,
-    help="Frontier allocation method [default: the scenario's, factor-graph].",
+    help="Frontier allocator [default: the scenario's algorithms.allocator, factor-graph].",
 )
 @click.option(
     "--out",
@@ -191,7 +192,7 @@ def run_command(
     if viz_out is not None and viz == "none":
         raise click.UsageError("--viz-out needs --viz rerun")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
-    scenario = scenario.with_algorithms(local_planner=planner, allocation_method=allocator)
+    scenario = scenario.with_algorithms(local_planner=planner, allocator=allocator)
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"
@@ -211,13 +212,13 @@ def run_command(
             scenario.config.name, total=limit_s, sim=0.0, explored=0.0, frontiers=0
         )
 
-        def show(status, explored_m2: float) -> None:
+        def show(snapshot, time_s: float, explored_m2: float) -> None:
             progress.update(
                 task,
-                completed=status.time_s,
-                sim=status.time_s,
+                completed=time_s,
+                sim=time_s,
                 explored=explored_m2,
-                frontiers=status.frontier_cells,
+                frontiers=len(snapshot.frontier_cells),
             )
 
         with _visualizer(viz, viz_out, scenario) as on_step:
@@ -342,7 +343,7 @@ def slam_mrclam_command(
     Landmark identities reach the association only with --known-association; start poses
     come from the first ground-truth sample, nothing else reads ground truth.
     """
-    from acslam.slam.mrclam_eval import run_mrclam
+    from acslam.replay.mrclam import run_mrclam
 
     metrics = run_mrclam(
         path,
@@ -375,7 +376,7 @@ def slam_carmen_command(log: Path, out_dir: Path) -> None:
     Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
     of every scan at its optimised pose; one TUM pose per FLASER line (ipc stamps).
     """
-    from acslam.slam.carmen_eval import run_carmen
+    from acslam.replay.carmen import run_carmen
 
     metrics = run_carmen(log, out_dir)
     skipped = metrics["skipped_lines"]["count"]

@@ -18,7 +18,16 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializeAsAny,
+    ValidationError,
+    WrapValidator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 from acslam.errors import ConfigError
 
@@ -33,6 +42,13 @@ class Section(BaseModel):
     """Base of every config section: unknown keys are errors, values are immutable."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class StageParams(Section):
+    """Base of a pipeline stage's parameters: ``name`` picks the plugin
+    (:mod:`acslam.pipeline.registry`), the other fields are that plugin's own."""
+
+    name: str
 
 
 # --------------------------------------------------------------------------- worlds
@@ -225,8 +241,8 @@ class SimConfig(Section):
 # --------------------------------------------------------------------------- algorithms
 
 
-class SlamConfig(Section):
-    """Factor-graph SLAM (thesis §4.4.1-4.4.2). Noise sigmas are ours.
+class SlamConfig(StageParams):
+    """Factor-graph SLAM (thesis §4.4.1-4.4.2): the ``isam2`` localizer. Noise sigmas are ours.
 
     Odometry sigmas grow with the distance / angle travelled between keyframes, never
     below the ``*_min_*`` floors. ``planar_sigma`` holds z, roll and pitch of the SE(3)
@@ -257,6 +273,7 @@ class SlamConfig(Section):
     linear system".
     """
 
+    name: Literal["isam2"] = "isam2"
     prior_sigma_xy_m: PositiveFloat = 0.01
     prior_sigma_theta_rad: PositiveFloat = 0.01
     planar_sigma: PositiveFloat = 0.001
@@ -287,8 +304,10 @@ class SlamConfig(Section):
     correction_threshold_m: PositiveFloat = 0.025
 
 
-class MappingConfig(Section):
-    """Log-odds occupancy grid (thesis §4.4.3, eqs. 4.25-4.34)."""
+class MappingConfig(StageParams):
+    """Log-odds occupancy grid (thesis §4.4.3, eqs. 4.25-4.34): the ``log-odds`` mapper."""
+
+    name: Literal["log-odds"] = "log-odds"
 
     resolution_m: PositiveFloat = 0.05
     delta_free: Annotated[float, Field(lt=0, allow_inf_nan=False)] = -0.4
@@ -333,71 +352,18 @@ class CostmapConfig(Section):
     unknown_cost: Probability = 0.5
 
 
-class ExplorationConfig(Section):
-    """Frontier detection (EWFD) and DBSCAN clustering (thesis §4.5)."""
-
-    dbscan_eps_m: PositiveFloat = 0.3
-    dbscan_min_points: Annotated[int, Field(ge=1)] = 5
-    min_cluster_size: Annotated[int, Field(ge=1)] = 5
-    # Information gain = unknown cells within this radius of a cluster's target cell: the
-    # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
-    information_gain_radius_m: PositiveFloat = 8.0
-
-
-class AllocationConfig(Section):
-    """Frontier-to-robot assignment (thesis §4.6, eqs. 4.37-4.42)."""
-
-    method: Literal["factor-graph", "hungarian", "greedy", "thesis"] = "factor-graph"
-    # Unary log-factor -alpha d + beta s (eq. 4.40): alpha per metre of travel, beta per
-    # frontier cell, so with these values 20 frontier cells (1 m at 0.05 m) are worth 1 m.
-    alpha: NonNegativeFloat = 1.0
-    beta: NonNegativeFloat = 0.05
-    # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
-    # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
-    # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
-    # sharing whenever there are enough clusters.
-    conflict_lambda: FiniteFloat = 0.01
-    # A robot's current goal counts this much closer when re-allocating: switching is
-    # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
-    commitment_m: NonNegativeFloat = 2.0
-    # d of eq. 4.40: "path" = costmap path length from one Dijkstra per robot (walls
-    # respected; unreachable clusters excluded), "euclidean" = straight line (reachability
-    # still checked). The "thesis" method always uses the straight line, unchecked.
-    distance_metric: Literal["path", "euclidean"] = "path"
-    # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
-    # metres, the unit alpha is stated in.
-    path_cost_weight: NonNegativeFloat = 0.0
-    # s of eq. 4.40: the cluster's frontier cells ("size"), or the unknown cells within
-    # sensor range of its target ("information_gain", scale beta down accordingly).
-    utility: Literal["size", "information_gain"] = "size"
-    # A robot localised in a lethal cell (inflation band) starts from the nearest free
-    # cell within this radius, as in PlanningConfig.astar_max_snap_m.
-    start_snap_m: NonNegativeFloat = 0.5
-    # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
-    # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
-    # (~50 ms) the approximate solver (greedy + pairwise local repair) is used.
-    exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
-
-
 class PlanningConfig(Section):
-    """Global A* and local planning (thesis §4.7-4.8).
+    """What the global and local planners share (thesis §4.7-4.8): the replanning and
+    control rates, the horizon, the clearances, and stuck detection and recovery.
 
     The thesis names these parameters but gives no values; the defaults are ours, chosen
     for the TurtleBot3 Burger (radius 0.105 m, 0.22 m/s) on a 0.05 m grid, and tuned on
-    the planning tests (head-on swap, obstacle bypass).
+    the planning tests (head-on swap, obstacle bypass). Each planner's own parameters are
+    in its section, ``algorithms.global_planner`` and ``algorithms.local_planner``.
     """
 
-    local_planner: Literal["fgp", "dwa"] = "fgp"
     replan_period_s: PositiveFloat = 2.0
-    # A* step cost = step length (m) * (1 + astar_cost_weight * cell cost).
-    astar_cost_weight: NonNegativeFloat = 5.0
-    # Start/goal inside lethal cells snap to the nearest free cell within this radius:
-    # a robot localised a few cells into the inflation band must still get a path.
-    astar_max_snap_m: NonNegativeFloat = 0.5
-    # Line-of-sight smoothing of the A* path (shorter in metres; cost no longer optimal).
-    astar_shortcut: bool = True
     horizon_s: PositiveFloat = 2.0  # T_p (eqs. 4.48-4.50, 4.67)
-    horizon_steps: Annotated[int, Field(ge=2)] = 10  # N of the FGP, dt = T_p / N = 0.2 s
     # Local planner rate: 10 Hz, a usual ROS local-planner rate and 5 sim steps of 0.02 s.
     control_period_s: PositiveFloat = 0.1
     # d_max^obs (eqs. 4.54, 4.63): ~3 robot radii, so the repulsion starts well before
@@ -405,33 +371,11 @@ class PlanningConfig(Section):
     obstacle_influence_m: PositiveFloat = 0.3
     # d_max^robot (eqs. 4.55, 4.65): robots repel within ~2.5 diameters.
     robot_influence_m: PositiveFloat = 0.55
-    # DWA (eqs. 4.48-4.56): velocity samples and the weights of eq. 4.51.
-    dwa_v_samples: Annotated[int, Field(ge=2)] = 11
-    dwa_omega_samples: Annotated[int, Field(ge=3)] = 21
-    dwa_weight_progress: NonNegativeFloat = 1.0
-    dwa_weight_heading: NonNegativeFloat = 0.3
-    dwa_weight_costmap: NonNegativeFloat = 0.5
-    dwa_weight_robot: NonNegativeFloat = 0.5
-    # FGP sigmas (eqs. 4.59-4.68). Start position is the measured pose (tight); start
-    # velocity may change by about one acceleration step; dynamics position sigma keeps
-    # the states kinematically consistent, the velocity sigma is ~max_acc * dt.
-    fgp_start_sigma_m: PositiveFloat = 0.001
-    fgp_start_sigma_mps: PositiveFloat = 0.05
-    fgp_dynamics_sigma_m: PositiveFloat = 0.005
-    fgp_dynamics_sigma_mps: PositiveFloat = 0.1
-    fgp_goal_sigma_m: PositiveFloat = 0.2  # moderate: the goal may yield to obstacles
-    fgp_obstacle_sigma: PositiveFloat = 0.1  # unitless error 1 - d / d_max
-    fgp_robot_sigma: PositiveFloat = 0.05  # unitless error 1 - d / d_max
-    # Cap on Levenberg-Marquardt linear solves per cycle (accepted and rejected steps).
-    fgp_max_iterations: Annotated[int, Field(ge=1)] = 20
-    # Sideways nudge of the initial guess when another robot is dead ahead: a symmetric
-    # head-on meeting is a saddle of eq. 4.69 where both robots would stop; both keep right.
-    fgp_keep_right_m: NonNegativeFloat = 0.1
     stuck_timeout_s: PositiveFloat = 10.0
     # Less than this gain in distance to the goal over stuck_timeout_s is "no progress".
     stuck_min_progress_m: PositiveFloat = 0.1
     # Recovery after a stuck event: reverse this far at this speed (the robot came in
-    # forward, so the way back is free), then replan A* with the cost raised by
+    # forward, so the way back is free), then replan the path with the cost raised by
     # recovery_penalty_cost within recovery_penalty_radius_m of where it got stuck
     # (~ the size of a dead end a local planner falls into).
     recovery_back_off_m: PositiveFloat = 0.25
@@ -517,15 +461,71 @@ class ScanMatchingConfig(Section):
     loop_min_separation_s: NonNegativeFloat = 20.0
 
 
+def _stage_section(kind: str) -> Any:
+    """A stage section: ``{name: PLUGIN, ...}`` validated by that plugin's own Params.
+
+    The plugin is looked up when a scenario is validated, not when this module is
+    imported, so plugins registered later (entry points, tests) are accepted too.
+    """
+
+    def dispatch(value: Any, handler: Any) -> StageParams:
+        from acslam.errors import PluginError
+        from acslam.pipeline.registry import REGISTRIES
+
+        registry = REGISTRIES[kind]
+        if isinstance(value, StageParams):
+            value = value.model_dump()
+        if not isinstance(value, dict):
+            raise PydanticCustomError(
+                "stage_section", "must be a mapping with the plugin's name and parameters"
+            )
+        try:
+            plugin = registry.get(value.get("name", registry.default))
+        except PluginError as exc:
+            raise PydanticCustomError("stage_section", str(exc)) from None
+        return plugin.params.model_validate(value)
+
+    def default() -> StageParams:
+        from acslam.pipeline.registry import REGISTRIES
+
+        return REGISTRIES[kind].default_params()
+
+    return Annotated[
+        SerializeAsAny[StageParams], WrapValidator(dispatch), Field(default_factory=default)
+    ]
+
+
 class AlgorithmsConfig(Section):
-    slam: SlamConfig = SlamConfig()
-    mapping: MappingConfig = MappingConfig()
+    """The server's stages, each chosen by name (``{name: ..., ...}``), and what they share."""
+
+    localizer: _stage_section("localizer")
+    mapper: _stage_section("mapper")
+    frontier_detector: _stage_section("frontier_detector")
+    clusterer: _stage_section("clusterer")
+    allocator: _stage_section("allocator")
+    global_planner: _stage_section("global_planner")
+    local_planner: _stage_section("local_planner")
     costmap: CostmapConfig = CostmapConfig()
-    exploration: ExplorationConfig = ExplorationConfig()
-    allocation: AllocationConfig = AllocationConfig()
     planning: PlanningConfig = PlanningConfig()
     server: ServerConfig = ServerConfig()
     scan_matching: ScanMatchingConfig = ScanMatchingConfig()
+
+    def with_stage(self, kind: str, name: str) -> AlgorithmsConfig:
+        """The same algorithms with stage ``kind`` replaced by plugin ``name``: fields the
+        scenario set in the current section that the new plugin also has are kept, every
+        other field takes the new plugin's default."""
+        from acslam.pipeline.registry import REGISTRIES
+
+        current = getattr(self, kind)
+        if current.name == name:
+            return self
+        params = REGISTRIES[kind].get(name).params
+        kept = {
+            k: getattr(current, k)
+            for k in current.model_fields_set
+            if k in params.model_fields and k != "name"
+        }
+        return self.model_copy(update={kind: params(name=name, **kept)})
 
 
 # --------------------------------------------------------------------------- scenario
@@ -542,7 +542,7 @@ class ScenarioConfig(Section):
     robots: RobotsConfig = RobotsConfig()
     sensors: SensorsConfig = SensorsConfig()
     sim: SimConfig = SimConfig()
-    algorithms: AlgorithmsConfig = AlgorithmsConfig()
+    algorithms: AlgorithmsConfig = Field(default_factory=AlgorithmsConfig)
 
 
 def builtin_scenario_names() -> list[str]:

@@ -38,3 +38,31 @@ class DataError(AcslamError):
 
 class MessageError(AcslamError, ValueError):
     """A robot <-> server message has an invalid field (NaN, inf, wrong shape)."""
+
+
+class NoPathError(AcslamError):
+    """No collision-free path exists (or start/goal have no free cell nearby)."""
+
+
+class SlamError(AcslamError):
+    """The optimiser failed (e.g. an indeterminant linear system); names the operation."""
+
+
+class PluginError(AcslamError):
+    """A plugin is unknown, registered twice, or its entry point cannot be loaded."""
+
+
+class WallTimeLimitError(AcslamError):
+    """Raised from the progress callback to stop a run that uses too much wall time."""
+
+
+class VizError(AcslamError):
+    """The live view cannot start."""
+
+
+class CodecError(MessageError):
+    """A payload that cannot be decoded into a valid message."""
+
+
+class TransportError(AcslamError):
+    """A bad endpoint, fault setting or robot id given to a distributed node."""

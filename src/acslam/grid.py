@@ -12,6 +12,13 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+UNKNOWN, FREE, OCCUPIED = -1, 0, 100
+"""ROS ``OccupancyGrid`` cell values: every occupancy array of acslam uses these."""
+
+NEIGHBOUR_ROWS = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
+NEIGHBOUR_COLS = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
+"""Row and column offsets of a cell's 8 neighbours, diagonals included."""
+
 
 @dataclass(frozen=True)
 class GridSpec:
@@ -68,6 +75,22 @@ class GridSpec:
             & (cells[:, 1] >= 0)
             & (cells[:, 1] < self.cols)
         )
+
+
+@dataclass(frozen=True)
+class Window:
+    """A rectangle of a larger grid: its rows ``[row0, row0 + spec.rows)``, its columns
+    ``[col0, col0 + spec.cols)``, and ``spec`` placing it in the world."""
+
+    row0: int
+    col0: int
+    spec: GridSpec
+
+    def crop(self, array: np.ndarray) -> np.ndarray:
+        return array[self.row0 : self.row0 + self.spec.rows, self.col0 : self.col0 + self.spec.cols]
+
+    def to_local(self, cells: np.ndarray) -> np.ndarray:
+        return np.asarray(cells) - np.array([self.row0, self.col0])
 
 
 @numba.njit(cache=True)

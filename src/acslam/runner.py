@@ -2,8 +2,10 @@
 
 Every control period the server gets the messages the robots sent since the last one
 (through the in-process transport) and answers with velocity commands; the simulator
-advances until the next period. The scoring and writing half (:func:`finish_run`) is
-shared with the distributed run, which gets its ground truth over the wire instead.
+advances until the next period. The run reads the server only through the
+snapshot each step returns (:class:`RunLog`). The scoring and writing half
+(:func:`finish_run`) is shared with the distributed run, which gets its ground truth over
+the wire instead.
 Ground truth is read only after the run, for the metrics. Whatever happens, the run folder
 gets ``config.yaml`` first and ``metrics.json`` last, with ``completed`` and ``reason``,
 so a failed or timed-out run keeps what it produced.
@@ -15,8 +17,9 @@ import json
 import math
 import time
 import traceback
+from collections import defaultdict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +33,11 @@ from acslam.eval.metrics import (
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
-from acslam.grid import GridSpec
+from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
+from acslam.pipeline.server import Server
+from acslam.pipeline.snapshot import Snapshot
 from acslam.scenario import Scenario
-from acslam.server import Server, ServerStatus
 from acslam.sim.simulator import Simulator
 from acslam.trajectory import write_tum
 from acslam.transport.inprocess import InProcessBus
@@ -58,13 +62,12 @@ def run_exploration(
     scenario: Scenario,
     out_dir: Path,
     max_time_s: float,
-    on_progress: Callable[[ServerStatus, float], None] | None = None,
-    on_step: Callable[[Server, float, list[RobotMessage]], None] | None = None,
+    on_progress: Callable[[Snapshot, float, float], None] | None = None,
+    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
 ) -> dict:
     """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written.
 
-    ``on_step`` sees the server after every step and the messages of that step (live
-    views)."""
+    ``on_step`` sees every step's snapshot and the messages of that step (live views)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
@@ -73,29 +76,29 @@ def run_exploration(
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
     bus = InProcessBus()
-    progress = ExploredHistory(server, scenario.world.spec, on_progress)
+    log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
     reason = "time limit"
     started = time.perf_counter()
     try:
         while sim.time_s < max_time_s - 1e-9:
             messages = bus.receive()
-            bus.send(server.step(messages, sim.time_s))
+            snapshot = server.step(messages, sim.time_s)
+            log.record(snapshot)
+            bus.send(list(snapshot.commands))
             if on_step is not None:
-                on_step(server, sim.time_s, messages)
-            if server.finished:
+                on_step(snapshot, messages)
+            if snapshot.finished:
                 reason = "explored"
                 break
             for _ in range(substeps):
                 for message in sim.step(bus.receive_commands()):
                     bus.publish(message)
-            progress.sample(sim.time_s)
+            log.sample_explored(sim.time_s)
     except Exception as exc:  # the run's products must survive any failure
         reason = failure_reason(exc, out_dir)
     wall_time_s = time.perf_counter() - started
     truth = TruthLog.of_simulator(sim)
-    return finish_run(
-        out_dir, scenario, server, truth, progress.history, reason, wall_time_s, sim.time_s
-    )
+    return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, sim.time_s)
 
 
 def failure_reason(exc: Exception, out_dir: Path) -> str:
@@ -107,29 +110,31 @@ def failure_reason(exc: Exception, out_dir: Path) -> str:
     return f"error: {type(exc).__name__}: {exc}"
 
 
-class ExploredHistory:
-    """Samples the explored area once per simulated second (and reports progress)."""
+@dataclass
+class RunLog:
+    """What a run keeps of the server's snapshots: the latest one, every stage's timings,
+    and the explored area once per simulated second (reported as progress)."""
 
-    def __init__(
-        self,
-        server: Server,
-        spec: GridSpec,
-        on_progress: Callable[[ServerStatus, float], None] | None = None,
-    ) -> None:
-        self.server = server
-        self.history: list[tuple[float, float]] = []
-        self._cell_area_m2 = spec.resolution_m**2
-        self._next_sample_s = 0.0
-        self._on_progress = on_progress
+    spec: GridSpec
+    last: Snapshot
+    on_progress: Callable[[Snapshot, float, float], None] | None = None
+    timings_s: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    explored_history: list[tuple[float, float]] = field(default_factory=list)
+    _next_sample_s: float = 0.0
 
-    def sample(self, time_s: float) -> None:
+    def record(self, snapshot: Snapshot) -> None:
+        self.last = snapshot
+        for stage, seconds in snapshot.timings_s.items():
+            self.timings_s[stage].append(seconds)
+
+    def sample_explored(self, time_s: float) -> None:
         if time_s < self._next_sample_s:
             return
-        known = self.server.team_map.global_grid.known_mask()
-        self.history.append((time_s, float(known.sum()) * self._cell_area_m2))
+        known = self.last.map.known_mask()
+        self.explored_history.append((time_s, float(known.sum()) * self.spec.resolution_m**2))
         self._next_sample_s += EXPLORED_SAMPLE_PERIOD_S
-        if self._on_progress is not None:
-            self._on_progress(self.server.status(time_s), self.history[-1][1])
+        if self.on_progress is not None:
+            self.on_progress(self.last, time_s, self.explored_history[-1][1])
 
 
 @dataclass(frozen=True)
@@ -149,17 +154,17 @@ class TruthLog:
 def finish_run(
     out_dir: Path,
     scenario: Scenario,
-    server: Server,
+    log: RunLog,
     truth: TruthLog,
-    explored_history: list[tuple[float, float]],
     reason: str,
     wall_time_s: float,
     time_s: float,
     extra: dict | None = None,
 ) -> dict:
-    """Score a finished run and write its folder; ``extra`` adds metric sections."""
-    record = _record(scenario, server, truth, explored_history)
-    metrics = _metrics(scenario, server, truth, record, reason, wall_time_s, time_s)
+    """Score a finished run from its last snapshot and write its folder; ``extra`` adds
+    metric sections."""
+    record = _record(scenario, log, truth)
+    metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
     metrics.update(extra or {})
     _write_outputs(out_dir, scenario, record)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
@@ -167,31 +172,29 @@ def finish_run(
     return metrics
 
 
-def _record(
-    scenario: Scenario, server: Server, truth_log: TruthLog, explored_history: list
-) -> RunRecord:
+def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
     """The arrays figures and metrics are made from, saved so reports can be rebuilt."""
     world = scenario.world
     count = scenario.robot_count
-    estimated = [server.slam.trajectory(i) for i in range(count)]
-    truth = truth_log.trajectories
+    last = log.last
+    estimated = [last.localization.trajectory(i) for i in range(count)]
     return RunRecord(
         spec=world.spec,
         true_occupied=world.occupied,
         reachable=world.reachable_free(*scenario.starts[0, :2], scenario.config.robots.radius_m),
-        estimated_values=server.team_map.global_grid.to_occupancy_values(),
-        robot_known=np.stack([server.team_map.robot_grid(i).known_mask() for i in range(count)]),
+        estimated_values=last.map.occupancy_values(),
+        robot_known=np.stack([last.map.robot_known_mask(i) for i in range(count)]),
         estimated_trajectories=[np.column_stack([s, p]) for s, p in estimated],
-        true_trajectories=truth,
-        explored_history=np.array(explored_history).reshape(-1, 2),
+        true_trajectories=truth_log.trajectories,
+        explored_history=np.array(log.explored_history).reshape(-1, 2),
         landmarks_true=scenario.landmarks,
-        landmarks_estimated=server.slam.landmarks(),
+        landmarks_estimated=last.localization.landmarks(),
     )
 
 
 def _metrics(
     scenario: Scenario,
-    server: Server,
+    log: RunLog,
     truth: TruthLog,
     record: RunRecord,
     reason: str,
@@ -200,17 +203,18 @@ def _metrics(
 ) -> dict:
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
+    last = log.last
     idle_or_end = [
-        task.idle_since_s if reason == "explored" and task.idle_since_s is not None else time_s
-        for task in server.tasks
+        idle_s if reason == "explored" and idle_s is not None else time_s
+        for idle_s in last.idle_since_s
     ]
-    finish = {names[i]: server.lost.get(i, end) for i, end in enumerate(idle_or_end)}
+    finish = {names[i]: last.lost.get(i, end) for i, end in enumerate(idle_or_end)}
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
         localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
     cell_area_m2 = scenario.world.spec.resolution_m**2
-    known = record.estimated_values != -1
+    known = record.estimated_values != UNKNOWN
     reachable = record.reachable
     if count > 1:
         true_xy = _common_clock_xy(record.true_trajectories)
@@ -219,19 +223,20 @@ def _metrics(
     else:
         min_distance = math.inf
     collisions = truth.collisions
-    samples = server.timer.samples
+    samples = log.timings_s
     cycle = np.array(samples.get("cycle", [0.0]))
     per_module = {
         module: {"mean": 1000 * float(np.mean(v)), "p95": 1000 * float(np.percentile(v, 95))}
         for module, v in samples.items()
         if module != "cycle"
     }
+    algorithms = scenario.config.algorithms
     return {
         "scenario": scenario.config.name,
         "robots": count,
         "seed": scenario.config.seed,
-        "planner": scenario.config.algorithms.planning.local_planner,
-        "allocator": scenario.config.algorithms.allocation.method,
+        "planner": algorithms.local_planner.name,
+        "allocator": algorithms.allocator.name,
         "completed": reason == "explored",
         "reason": reason,
         "sim_time_s": time_s,
@@ -250,7 +255,7 @@ def _metrics(
             "obstacle_collisions": int(collisions[:, 0].sum()),
             "robot_collisions": int(collisions[:, 1].sum()),
             "min_robot_distance_m": min_distance,
-            "stuck_events": int(sum(task.recovery.count for task in server.tasks)),
+            "stuck_events": int(sum(last.stuck_events)),
         },
         "server_cycle_ms": {
             "mean": 1000 * float(np.mean(cycle)),

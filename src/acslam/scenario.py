@@ -55,16 +55,15 @@ class Scenario:
         )
 
     def with_algorithms(
-        self, local_planner: str | None = None, allocation_method: str | None = None
+        self, local_planner: str | None = None, allocator: str | None = None
     ) -> Scenario:
-        """The same scenario with another local planner and/or allocation method."""
+        """The same scenario with another local planner and/or allocator, by plugin name
+        (:meth:`~acslam.config.AlgorithmsConfig.with_stage` says which fields carry over)."""
         algorithms = self.config.algorithms
         if local_planner is not None:
-            planning = algorithms.planning.model_copy(update={"local_planner": local_planner})
-            algorithms = algorithms.model_copy(update={"planning": planning})
-        if allocation_method is not None:
-            allocation = algorithms.allocation.model_copy(update={"method": allocation_method})
-            algorithms = algorithms.model_copy(update={"allocation": allocation})
+            algorithms = algorithms.with_stage("local_planner", local_planner)
+        if allocator is not None:
+            algorithms = algorithms.with_stage("allocator", allocator)
         config = self.config.model_copy(update={"algorithms": algorithms})
         return Scenario(config, self.source, self.world, self.starts, self.landmarks)
 

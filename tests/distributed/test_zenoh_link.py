@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from acslam.distributed.launch import free_port
+from acslam.errors import TransportError
 from acslam.geometry import compose
 from acslam.messages import LidarScan, OdometryIncrement
-from acslam.transport import TransportError, robot_key
+from acslam.transport import robot_key
 from acslam.transport.codec import encode
 from acslam.transport.zenoh_link import (
     FaultInjection,

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from acslam.config import AllocationConfig, CostmapConfig
+from acslam.config import CostmapConfig
 from acslam.exploration.allocation import (
-    allocate,
+    FactorGraphParams,
     joint_assignment_count,
     log_objective,
     solve_approximate,
@@ -20,6 +20,14 @@ from acslam.exploration.allocation import (
 from acslam.exploration.clustering import FrontierCluster
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
+from acslam.pipeline.registry import ALLOCATORS
+
+
+def allocate(robot_cells, clusters, costmap, name="factor-graph", **params):
+    """The registered allocator ``name`` with ``params`` over its defaults."""
+    allocator = ALLOCATORS.create(ALLOCATORS.get(name).params(**params))
+    return allocator.allocate(robot_cells, clusters, costmap)
+
 
 LAMBDAS = (0.01, 0.5, 1.0, 2.0, -3.0, -40.0)
 
@@ -110,13 +118,13 @@ def test_path_distance_respects_walls() -> None:
     costmap = compute_costmap(values, spec, CostmapConfig(), 0.1)
     clusters = [_cluster_at(spec, (6.0, 1.0)), _cluster_at(spec, (1.0, 1.0))]
     robot = spec.world_to_cell(np.array([4.0, 1.0]))
-    by_path = allocate(robot, clusters, costmap, AllocationConfig())
+    by_path = allocate(robot, clusters, costmap)
     assert by_path.cluster_of_robot == (1,)
     assert by_path.distances_m[0, 0] > 5.0 > 3.5 > by_path.distances_m[0, 1]
-    by_line = allocate(robot, clusters, costmap, AllocationConfig(method="thesis"))
+    by_line = allocate(robot, clusters, costmap, "thesis")
     assert by_line.cluster_of_robot == (0,)
     for method in ("hungarian", "greedy"):
-        result = allocate(robot, clusters, costmap, AllocationConfig(method=method))
+        result = allocate(robot, clusters, costmap, method)
         assert result.cluster_of_robot == (1,)
 
 
@@ -127,7 +135,7 @@ def test_robot_without_reachable_cluster_is_idle_and_unreachable_clusters_are_ex
     clusters = [_cluster_at(spec, (6.0, 1.0)), _cluster_at(spec, (8.0, 3.0))]
     robots = spec.world_to_cell(np.array([[4.0, 1.0], [9.0, 1.0], [7.0, 2.0]]))
     for method in ("factor-graph", "hungarian", "greedy"):
-        result = allocate(robots, clusters, costmap, AllocationConfig(method=method))
+        result = allocate(robots, clusters, costmap, method)
         assert result.status(0) == "idle"
         assert result.cluster_of_robot[1:] in {(0, 1), (1, 0)}
         assert np.isinf(result.distances_m[0]).all()
@@ -140,12 +148,12 @@ def test_large_instances_switch_to_the_approximate_solver() -> None:
     costmap = compute_costmap(values, spec, CostmapConfig(), 0.1)
     clusters = [_cluster_at(spec, tuple(rng.uniform(0.5, 5.5, 2))) for _ in range(20)]
     robots = rng.integers(5, 55, (8, 2))
-    config = AllocationConfig()
-    result = allocate(robots, clusters, costmap, config)
+    config = FactorGraphParams()
+    result = allocate(robots, clusters, costmap)
     assert joint_assignment_count(np.zeros((8, 20)), config.conflict_lambda) == 8**8
     assert result.solver == "approximate"
     assert all(k is not None for k in result.cluster_of_robot)
-    small = allocate(robots[:3], clusters, costmap, config)
+    small = allocate(robots[:3], clusters, costmap)
     assert small.solver == "exact"
 
 
@@ -159,7 +167,7 @@ def test_approximate_solver_gap_on_instances_exact_can_solve() -> None:
         lam = float(rng.choice(LAMBDAS[:3] + LAMBDAS[4:]))  # lambda <= 1: exact stays small
         distances = _random_instance(rng, robots, clusters)
         unary = unary_log_factors(distances, rng.integers(5, 120, clusters), 1.0, 0.05)
-        assert joint_assignment_count(unary, lam) <= AllocationConfig().exact_max_joint_assignments
+        assert joint_assignment_count(unary, lam) <= FactorGraphParams().exact_max_joint_assignments
         exact = log_objective(solve_exact(unary, lam), unary, lam)
         approx = log_objective(solve_approximate(unary, lam), unary, lam)
         assert approx <= exact + 1e-9

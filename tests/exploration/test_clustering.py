@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from acslam.config import CostmapConfig, ExplorationConfig
-from acslam.exploration.clustering import UnknownDiscCounter, cluster_frontiers
+from acslam.config import CostmapConfig
+from acslam.exploration.clustering import DbscanParams, UnknownDiscCounter, cluster_frontiers
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
 
 RES_M = 0.05
 SPEC = GridSpec(0.0, 0.0, RES_M, 100, 100)
-CONFIG = ExplorationConfig(dbscan_eps_m=0.1, dbscan_min_points=3, min_cluster_size=3)
+CONFIG = DbscanParams(eps_m=0.1, min_points=3, min_cluster_size=3)
 
 
 def test_two_separated_lines_give_two_clusters_of_the_right_sizes() -> None:

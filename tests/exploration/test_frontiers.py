@@ -95,7 +95,7 @@ def test_ewfd_matches_oracle_on_simulated_multi_robot_exploration(seed: int) -> 
     world = build_world(world_cfg, seed)
     lidar = LidarConfig(beams=120, range_max_m=3.0)
     mapping = MappingConfig(resolution_m=0.1, max_range_m=3.0)
-    team = TeamMap(world.spec, mapping)
+    team = TeamMap(mapping, spec=world.spec)
     detector = EwfdFrontierDetector(world.spec, active_radius_m(mapping))
     sensors = [LidarSensor(lidar, world, np.random.default_rng(seed * 10 + k)) for k in range(3)]
     poses = [_free_pose(world, rng, None) for _ in range(3)]

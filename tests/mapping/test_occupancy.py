@@ -141,7 +141,7 @@ def test_random_corrections_equal_integrating_from_scratch() -> None:
     rng = np.random.default_rng(42)
     spec = grid_spec_for_bounds(-6.0, -6.0, 6.0, 6.0, 0.05)
     cfg = MappingConfig(max_range_m=4.0, log_odds_min=-1.0, log_odds_max=1.0)
-    team = TeamMap(spec, cfg)
+    team = TeamMap(cfg, spec=spec)
     scans = {}
     for key in range(30):
         robot_id = key % 3
@@ -154,7 +154,7 @@ def test_random_corrections_equal_integrating_from_scratch() -> None:
         new_pose = team.scan_pose(("scan", key)) + rng.normal(0.0, [0.1, 0.1, 0.05])
         team.move_scan(("scan", key), new_pose)
 
-    fresh = TeamMap(spec, cfg)
+    fresh = TeamMap(cfg, spec=spec)
     for key, (robot_id, ranges, angles) in scans.items():
         fresh.add_scan(robot_id, ("scan", key), ranges, angles, team.scan_pose(("scan", key)))
     assert np.array_equal(team.global_grid.accumulator_fixed, fresh.global_grid.accumulator_fixed)
@@ -179,7 +179,7 @@ def test_random_corrections_equal_integrating_from_scratch() -> None:
 
 
 def test_team_map_rejects_duplicate_keys() -> None:
-    team = TeamMap(GridSpec(0.0, 0.0, 0.1, 10, 10), MappingConfig())
+    team = TeamMap(MappingConfig(), spec=GridSpec(0.0, 0.0, 0.1, 10, 10))
     team.add_scan(0, "a", [0.3], [0.0], [0.5, 0.5, 0.0])
     with pytest.raises(KeyError):
         team.add_scan(1, "a", [0.3], [0.0], [0.5, 0.5, 0.0])

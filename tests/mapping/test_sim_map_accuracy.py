@@ -6,7 +6,7 @@ map, not the planner). The server's SLAM and mapping pieces see only the robots'
 messages: odometry, camera landmarks and LiDAR into :class:`SlamBackend` with
 :class:`LidarConstraints`, scans into :class:`TeamMap` at their keyframe-relative pose and
 moved when SLAM corrects a keyframe, beams ending on another robot dropped, all wired as in
-:class:`acslam.server.Server`. The global map is scored against the true occupancy over
+:class:`acslam.pipeline.server.Server`. The global map is scored against the true occupancy over
 its known cells with :func:`confusion_rates`.
 """
 
@@ -56,12 +56,12 @@ def _waypoints(scenario: Scenario, goals: list[tuple[float, float]], start: np.n
     world = scenario.world
     robots = scenario.config.robots
     costmap = compute_costmap(world_cells(world), world.spec, CostmapConfig(), robots.radius_m)
-    planning = scenario.config.algorithms.planning
+    astar = scenario.config.algorithms.global_planner
     points, here = [], start[:2]
     for goal in goals:
         path = plan_path(
             costmap.cost, costmap.lethal, world.spec, here, np.array(goal),
-            planning.astar_cost_weight, planning.astar_max_snap_m, False,
+            astar.cost_weight, astar.max_snap_m, False,
         )  # fmt: skip
         points.extend(path.points_m[1:])
         here = path.points_m[-1]
@@ -106,9 +106,9 @@ def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
     sim = Simulator(
         world, starts, scenario.landmarks, config.robots, config.sensors, config.sim, config.seed
     )
-    slam = SlamBackend(algorithms.slam, {i: s for i, s in enumerate(starts)})
+    slam = SlamBackend(algorithms.localizer, {i: s for i, s in enumerate(starts)})
     lidar = LidarConstraints(algorithms.scan_matching)
-    team = TeamMap(world.spec, algorithms.mapping.model_copy(update=MAPPING[name]))
+    team = TeamMap(algorithms.mapper.model_copy(update=MAPPING[name]), spec=world.spec)
     reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
     substeps = max(1, round(CONTROL_PERIOD_S / config.sim.dt_s))
     next_target = [0] * len(starts)
@@ -163,7 +163,7 @@ def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
         f"{[len(r) for r in routes]}, robots at {sim.ground_truth.poses().round(2).tolist()}, "
         f"routes {[r.round(1).tolist() for r in routes]}"
     )
-    values = team.global_grid.to_occupancy_values()
+    values = team.occupancy_values()
     return confusion_rates(world.occupied, values), len(team)
 
 

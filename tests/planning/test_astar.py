@@ -10,10 +10,9 @@ import pytest
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
-from acslam.errors import AcslamError
+from acslam.errors import AcslamError, NoPathError
 from acslam.grid import GridSpec
 from acslam.planning.astar import (
-    NoPathError,
     astar_cells,
     distances_from,
     lookahead_point,

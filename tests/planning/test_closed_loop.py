@@ -21,12 +21,13 @@ from acslam.config import (
     SensorsConfig,
     SimConfig,
 )
+from acslam.errors import NoPathError
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
 from acslam.messages import VelocityCommand
-from acslam.planning.astar import NoPathError, lookahead_point, plan_path, remaining_length_m
-from acslam.planning.dwa import DynamicWindowPlanner
-from acslam.planning.fgp import FactorGraphPlanner
+from acslam.planning.astar import AstarParams, lookahead_point, plan_path, remaining_length_m
+from acslam.planning.dwa import DwaParams, DynamicWindowPlanner
+from acslam.planning.fgp import FactorGraphPlanner, FgpParams
 from acslam.planning.field import DistanceField, RobotState
 from acslam.planning.recovery import Recovery
 from acslam.planning.stuck import StuckDetector
@@ -36,6 +37,7 @@ from acslam.worlds.world import World
 
 ROBOTS = RobotsConfig()
 PLANNING = PlanningConfig()
+ASTAR = AstarParams()
 SIM = SimConfig()
 # No sensor is read (the planners get the truth): fire none within the runs.
 SENSORS = SensorsConfig(lidar=LidarConfig(rate_hz=1e-3), camera=CameraConfig(rate_hz=1e-3))
@@ -99,8 +101,8 @@ def drive(
     sim = Simulator(world, np.array(starts), np.zeros((0, 3)), ROBOTS, SENSORS, SIM, seed)
     goals_m = [np.array(g, dtype=float) for g in goals]
     count = len(starts)
-    fgp = FactorGraphPlanner(PLANNING, ROBOTS)
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    fgp = FactorGraphPlanner(FgpParams(), planning=PLANNING, robots=ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     recoveries = [Recovery(PLANNING) for _ in range(count)]
     follow_path = [global_path] * count
     paths: list[np.ndarray] = [np.array([s[:2], g]) for s, g in zip(starts, goals_m, strict=True)]
@@ -119,9 +121,9 @@ def drive(
                 spec,
                 xy_m,
                 goals_m[r],
-                PLANNING.astar_cost_weight,
-                PLANNING.astar_max_snap_m,
-                PLANNING.astar_shortcut,
+                ASTAR.cost_weight,
+                ASTAR.max_snap_m,
+                ASTAR.shortcut,
             )
         except NoPathError:
             return  # keep the previous path
@@ -149,7 +151,7 @@ def drive(
                 replan(r, state.xy_m, now_s)
             lookahead.append(lookahead_point(paths[r], state.xy_m, reach_m))
         if planner == "fgp":
-            commands = fgp.plan(states, lookahead, field).commands
+            commands = fgp.plan(states, lookahead, field)
         else:
             headings = poses[:, 2]
             moving = np.array([v for v, _ in velocities])

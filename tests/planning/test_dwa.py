@@ -10,12 +10,12 @@ from scipy import ndimage
 
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
-from acslam.planning.dwa import DynamicWindowPlanner, rollout_arcs
+from acslam.planning.dwa import DwaParams, DynamicWindowPlanner, rollout_arcs
 from acslam.planning.field import DistanceField, RobotState
 from acslam.sim.kinematics import limit_command, step_pose
 
 ROBOTS = RobotsConfig()
-PLANNING = PlanningConfig(local_planner="dwa")
+PLANNING = PlanningConfig()
 GRID = GridSpec(-3.0, -3.0, 0.05, 120, 120)
 
 
@@ -27,7 +27,7 @@ FREE = DistanceField(np.full(GRID.shape, 10.0), GRID)
 
 
 def test_free_space_goal_ahead_reaches_max_speed_straight() -> None:
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     state = RobotState(0.0, 0.0, 0.0)
     for _ in range(10):
         v, omega = dwa.command(state, np.array([5.0, 0.0]), FREE)
@@ -37,7 +37,7 @@ def test_free_space_goal_ahead_reaches_max_speed_straight() -> None:
 
 
 def test_goal_behind_turns_toward_it() -> None:
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     pose, vel = (0.0, 0.0, 0.0), (0.0, 0.0)
     goal = np.array([-1.0, 0.3])  # behind, slightly to the left
     v, omega = dwa.command(RobotState(*pose, *vel), goal, FREE)
@@ -59,7 +59,7 @@ def test_wall_ahead_at_full_speed_is_never_hit() -> None:
     occupied = np.zeros(GRID.shape, dtype=bool)
     occupied[:, GRID.world_to_cell([[0.4, 0.0]])[0, 1] :] = True  # wall from x = 0.4 m
     field = field_of(occupied)
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     times = np.linspace(0.01, PLANNING.horizon_s, 200)
     pose, vel = (0.0, 0.0, 0.0), (ROBOTS.max_v_mps, 0.0)
     for _ in range(100):
@@ -75,7 +75,7 @@ def test_wall_ahead_at_full_speed_is_never_hit() -> None:
 
 def test_other_robot_ahead_is_not_hit() -> None:
     """Safety only: DWA may stop in front of it (the local minimum of thesis §4.8)."""
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     other = np.array([[0.6, 0.0]])
     pose, vel = (0.0, 0.0, 0.0), (ROBOTS.max_v_mps, 0.0)
     for _ in range(100):
@@ -87,7 +87,7 @@ def test_other_robot_ahead_is_not_hit() -> None:
 
 
 def test_command_stays_in_the_acceleration_window() -> None:
-    dwa = DynamicWindowPlanner(PLANNING, ROBOTS)
+    dwa = DynamicWindowPlanner(DwaParams(), planning=PLANNING, robots=ROBOTS)
     rng = np.random.default_rng(1)
     dv = ROBOTS.max_acc_v_mps2 * PLANNING.control_period_s
     dw = ROBOTS.max_acc_omega_radps2 * PLANNING.control_period_s

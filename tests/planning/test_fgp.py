@@ -12,12 +12,24 @@ from scipy import ndimage
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
 from acslam.planning.astar import lookahead_point, plan_path
-from acslam.planning.fgp import FactorGraphPlanner, FgpProblem, obstacle_errors, robot_errors
+from acslam.planning.fgp import (
+    FactorGraphPlanner,
+    FgpParams,
+    FgpProblem,
+    obstacle_errors,
+    robot_errors,
+)
 from acslam.planning.field import DistanceField, RobotState
 from acslam.sim.kinematics import limit_command, step_pose
 
 ROBOTS = RobotsConfig()
 PLANNING = PlanningConfig()
+
+
+def new_planner() -> FactorGraphPlanner:
+    return FactorGraphPlanner(FgpParams(), planning=PLANNING, robots=ROBOTS)
+
+
 SIM_DT_S = 0.02
 
 
@@ -77,8 +89,8 @@ def test_linearised_graph_matches_the_cost_to_first_order() -> None:
     their error at delta = 0 is the cost, their gradient its numeric gradient."""
     rng = np.random.default_rng(3)
     grid, distance = disc_world((0.0, 0.0), 0.3)
-    planner = FactorGraphPlanner(PLANNING, ROBOTS)
-    count, n = 3, PLANNING.horizon_steps
+    planner = new_planner()
+    count, n = 3, FgpParams().horizon_steps
     # Three robots passing close to the disc and to each other.
     x = np.zeros((count, n + 1, 4))
     for r, y0 in enumerate((-0.35, -0.05, 0.3)):
@@ -132,7 +144,7 @@ def drive(
             lookahead_point(path, s.xy_m, lookahead_m)
             for path, s in zip(paths, states, strict=True)
         ]
-        result = planner.plan(states, goals, field)
+        result = planner.solve(states, goals, field)
         for r, (v, omega) in enumerate(result.commands):
             assert 0.0 <= v <= ROBOTS.max_v_mps and abs(v - velocities[r][0]) <= dv + 1e-12
             assert abs(omega) <= ROBOTS.max_omega_radps
@@ -149,7 +161,7 @@ def test_two_robots_head_on_swap_positions_without_contact() -> None:
     starts = [(-2.0, 0.0, 0.0), (2.0, 0.0, math.pi)]
     goals = [np.array([2.0, 0.0]), np.array([-2.0, 0.0])]
     paths = [np.array([s[:2], g]) for s, g in zip(starts, goals, strict=True)]
-    history = drive(FactorGraphPlanner(PLANNING, ROBOTS), list(starts), paths, field, 30.0)
+    history = drive(new_planner(), list(starts), paths, field, 30.0)
     separation = np.linalg.norm(history[:, 0, :2] - history[:, 1, :2], axis=1)
     assert separation.min() >= 2 * ROBOTS.radius_m
     for r in range(2):
@@ -164,9 +176,7 @@ def test_single_robot_goes_around_an_obstacle_hugged_by_the_global_path() -> Non
     # Cost weight 0: the shortest path grazes the lethal band, the FGP must keep clear.
     path = plan_path(np.zeros(grid.shape), lethal, grid, start, goal, 0.0, 0.2, True)
     assert float(field.value(path.points_m).min()) < 0.2
-    history = drive(
-        FactorGraphPlanner(PLANNING, ROBOTS), [(-2.0, 0.0, 0.0)], [path.points_m], field, 30.0
-    )
+    history = drive(new_planner(), [(-2.0, 0.0, 0.0)], [path.points_m], field, 30.0)
     clearance = np.linalg.norm(history[:, 0, :2], axis=1) - 0.3
     assert clearance.min() > ROBOTS.radius_m
     assert np.linalg.norm(history[-1, 0, :2] - goal) < 0.15

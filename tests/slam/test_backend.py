@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from acslam.config import SlamConfig
+from acslam.errors import SlamError
+from acslam.eval.metrics import pairwise_precision_recall
 from acslam.geometry import between, compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
-from acslam.slam import SlamBackend, SlamError, keys
-from acslam.slam.mrclam_eval import pairwise_precision_recall
+from acslam.slam import SlamBackend, keys
 
 DT = 0.1
 # Landmarks on a 1.5 m lattice: far apart relative to the 1 m gate and 3 cm noise, so the
@@ -302,7 +303,7 @@ def test_isam2_speed_measurement_is_consistent() -> None:
     keyframes, buckets that cover the run, and an estimate that stayed near the truth
     (measured 0.13 m worst final error after 30 cycles, 9 m per robot, before the first
     loop closes; 0.04 m after 100 cycles)."""
-    from acslam.slam.speed import measure_isam2_updates
+    from acslam.benchmarks.isam2 import measure_isam2_updates
 
     result = measure_isam2_updates(keyframes=90, robots=3, seed=1)
     assert [b["updates"] for b in result["buckets"]] == [30]

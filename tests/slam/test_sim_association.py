@@ -23,12 +23,12 @@ from acslam.config import (
     SimConfig,
     SlamConfig,
 )
+from acslam.eval.metrics import pairwise_precision_recall
 from acslam.geometry import compose
 from acslam.grid import GridSpec
 from acslam.messages import LandmarkObservations, OdometryIncrement, VelocityCommand
 from acslam.sim.simulator import Simulator
 from acslam.slam import SlamBackend
-from acslam.slam.mrclam_eval import pairwise_precision_recall
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.world import World
 

@@ -9,8 +9,8 @@ import pytest
 from PIL import Image
 
 from acslam.errors import DataError
-from acslam.grid import GridSpec
-from acslam.worlds.mapio import FREE, OCCUPIED, UNKNOWN, load_map, load_world, save_map
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from acslam.worlds.mapio import load_map, load_world, save_map
 
 
 def test_round_trip_is_exact(tmp_path: Path) -> None:

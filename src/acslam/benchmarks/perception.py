@@ -11,17 +11,14 @@ from scipy.spatial import cKDTree
 
 from acslam.benchmarks.core import Figure, median_ms
 from acslam.config import (
-    AllocationConfig,
     CostmapConfig,
-    ExplorationConfig,
     LidarConfig,
     MappingConfig,
     RobotsConfig,
     ScanMatchingConfig,
     ThesisWorld,
 )
-from acslam.exploration.allocation import allocate
-from acslam.exploration.clustering import FrontierCluster, cluster_frontiers
+from acslam.exploration.clustering import DbscanParams, FrontierCluster, cluster_frontiers
 from acslam.exploration.frontiers import (
     EwfdFrontierDetector,
     active_radius_m,
@@ -31,6 +28,7 @@ from acslam.geometry import compose
 from acslam.grid import GridSpec
 from acslam.mapping import LogOddsGrid, TeamMap, compute_costmap, grid_spec_for_bounds
 from acslam.mapping.scan_matching import match_scans, prepare_scan
+from acslam.pipeline.registry import ALLOCATORS
 from acslam.planning.astar import astar_cells
 from acslam.sim.lidar import LidarSensor
 from acslam.worlds.generators import build_world
@@ -70,7 +68,7 @@ def bench_mapping(quick: bool) -> list[Figure]:
         grid.integrate(ranges, angles, pose)
 
     scan_ms = median_ms(integrate_one, 60 if quick else 300)
-    team = TeamMap(spec, grid.config)
+    team = TeamMap(grid.config, spec=spec)
     team.add_scan(0, "moved", scans[0][0], angles, scans[0][1])
     shifts = iter(range(10**9))
 
@@ -182,7 +180,7 @@ def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
     world = build_world(ThesisWorld(generator="thesis", experiment=4), 0)
     rng = np.random.default_rng(0)
     mapping = MappingConfig()
-    team = TeamMap(world.spec, mapping)
+    team = TeamMap(mapping, spec=world.spec)
     sensors = [LidarSensor(LidarConfig(), world, np.random.default_rng(k)) for k in range(3)]
     paths = _scripted_paths(world, rng, rounds)
     detector = EwfdFrontierDetector(world.spec, active_radius_m(mapping))
@@ -194,7 +192,7 @@ def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
             pose = np.array([*positions[k], rng.uniform(-np.pi, np.pi)])
             scan = sensor.scan(k, float(step), tuple(pose), no_discs, -1)
             team.add_scan(k, (k, step), scan.ranges, scan.angles, pose, scan.range_max_m)
-        values = team.global_grid.to_occupancy_values()
+        values = team.occupancy_values()
         robot_cells = world.spec.world_to_cell(positions)
         t0 = time.perf_counter()
         got = detector.update(values, robot_cells, robot_cells)
@@ -223,13 +221,14 @@ def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
 def bench_allocation(
     quick: bool, world: World, values: np.ndarray, frontier: np.ndarray
 ) -> list[Figure]:
-    """DBSCAN clustering and the four allocators (20 clusters) against an 800x800 ``np.sort``."""
+    """DBSCAN clustering and every registered allocator (20 clusters) against an 800x800
+    ``np.sort``."""
     data = np.random.default_rng(0).random((800, 800))
     sort_ms = median_ms(lambda: np.sort(data, axis=1), 5)
     reference = "np.sort of 800x800 float64 rows"
     spec = world.spec
     costmap = compute_costmap(values, spec, CostmapConfig(), RobotsConfig().radius_m)
-    exploration = ExplorationConfig()
+    exploration = DbscanParams()
     clusters = cluster_frontiers(frontier, values, spec, costmap, exploration)
     figures = [
         Figure(
@@ -260,18 +259,20 @@ def bench_allocation(
     )[:20]
     for robots in (3,) if quick else (3, 5, 8):
         cells = reachable[rng.choice(len(reachable), robots, replace=False)]
-        for method in ("factor-graph", "hungarian", "greedy", "thesis"):
-            run = partial(allocate, cells, clusters, costmap, AllocationConfig(method=method))
+        for name in ALLOCATORS.names():
+            params = ALLOCATORS.get(name).params()
+            allocator = ALLOCATORS.create(params)
+            run = partial(allocator.allocate, cells, clusters, costmap)
             figures.append(
                 Figure(
                     "exploration",
-                    f"allocation {method}, {robots} robots x 20 clusters",
+                    f"allocation {name}, {robots} robots x 20 clusters",
                     median_ms(run, 2),
                     "ms",
                     reference,
                     sort_ms,
                     "straight-line distances, no Dijkstra"
-                    if method == "thesis"
+                    if getattr(params, "distance_metric", None) == "euclidean-unchecked"
                     else "includes one Dijkstra per robot",
                 )
             )

@@ -14,8 +14,8 @@ from scipy.sparse.csgraph import dijkstra
 from acslam.benchmarks.core import Figure
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
-from acslam.planning.astar import astar_cells
-from acslam.planning.fgp import FactorGraphPlanner
+from acslam.planning.astar import AstarParams, astar_cells
+from acslam.planning.fgp import FactorGraphPlanner, FgpParams
 from acslam.planning.field import DistanceField, RobotState
 from acslam.sim.kinematics import limit_command, step_pose
 
@@ -68,7 +68,7 @@ def bench_astar(quick: bool) -> list[Figure]:
     cuts corners, so its paths differ from ours; this compares speed only.
     """
     size = 400 if quick else 800
-    weight = PlanningConfig().astar_cost_weight
+    weight = AstarParams().cost_weight
     has_pyastar = importlib.util.find_spec("pyastar2d") is not None
     queries = [((5, 5), (size - 10, size - 10)), ((5, size - 10), (size - 10, 5))]
     cost, lethal = _costmap(size, 0)
@@ -123,7 +123,7 @@ def bench_fgp(quick: bool) -> list[Figure]:
         poses = [(2.0 * math.cos(a), 2.0 * math.sin(a), a + math.pi) for a in angles]
         goals = [np.array([-p[0], -p[1]]) for p in poses]
         velocities = [(0.0, 0.0)] * count
-        planner = FactorGraphPlanner(planning, robots)
+        planner = FactorGraphPlanner(FgpParams(), planning=planning, robots=robots)
         times = []
         for _ in range(cycles):
             states = [RobotState(*p, *v) for p, v in zip(poses, velocities, strict=True)]
@@ -134,7 +134,7 @@ def bench_fgp(quick: bool) -> list[Figure]:
                 norm = float(np.linalg.norm(gap))
                 lookahead.append(goal if norm <= reach else state.xy_m + gap * reach / norm)
             t0 = time.perf_counter()
-            result = planner.plan(states, lookahead, field)
+            result = planner.solve(states, lookahead, field)
             times.append(time.perf_counter() - t0)
             for r, (v, w) in enumerate(result.commands):
                 for _ in range(5):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.benchmarks.core import Figure
+from acslam.benchmarks.isam2 import measure_isam2_updates
 from acslam.config import (
     DungeonWorld,
     LandmarkConfig,
@@ -24,7 +25,6 @@ from acslam.scenario import load_scenario
 from acslam.seeding import Stream, rng
 from acslam.sim.lidar import beam_angles
 from acslam.sim.simulator import Simulator
-from acslam.slam.speed import measure_isam2_updates
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.world import World
@@ -69,7 +69,7 @@ def bench_server_cycle(quick: bool) -> list[Figure]:
 
 
 def bench_isam2(quick: bool) -> list[Figure]:
-    """iSAM2 update time per 500 keyframes of graph size (:mod:`acslam.slam.speed`).
+    """iSAM2 update time per 500 keyframes of graph size (:mod:`acslam.benchmarks.isam2`).
 
     Three robots circle through a landmark grid, closing loops every lap; the reference
     is the mean update over the first 500 keyframes.

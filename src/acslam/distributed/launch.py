@@ -17,8 +17,8 @@ from pathlib import Path
 from acslam.distributed.robot_node import RobotOptions
 from acslam.distributed.server_node import ServeOptions, serve
 from acslam.messages import RobotMessage
+from acslam.pipeline.snapshot import Snapshot
 from acslam.scenario import Scenario
-from acslam.server import Server, ServerStatus
 
 ROBOT_EXIT_TIMEOUT_S = 15.0
 
@@ -75,8 +75,8 @@ def run_distributed(
     out_dir: Path,
     max_time_s: float,
     robot_options: RobotOptions | None = None,
-    on_progress: Callable[[ServerStatus, float], None] | None = None,
-    on_step: Callable[[Server, float, list[RobotMessage]], None] | None = None,
+    on_progress: Callable[[Snapshot, float, float], None] | None = None,
+    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
 ) -> dict:
     """Start N robot processes, serve them until the run ends, collect; returns metrics."""
     robot_options = robot_options or RobotOptions()

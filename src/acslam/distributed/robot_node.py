@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from acslam.errors import TransportError
 from acslam.messages import VelocityCommand
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
-from acslam.transport import TransportError
 from acslam.transport.codec import TruthBatch
 from acslam.transport.zenoh_link import FaultInjection, ZenohRobotEndpoint, open_session
 
@@ -145,9 +145,8 @@ class _Agent:
         return True
 
     def _step(self, command: VelocityCommand) -> None:
-        robots = self.sim._robots  # the others' poses come from the truth channel
-        for other, (x, y, theta) in self.link.other_poses().items():
-            robots[other].x_m, robots[other].y_m, robots[other].theta_rad = x, y, theta
+        for other, pose in self.link.other_poses().items():
+            self.sim.place_robot(other, pose)  # the others' poses come from the truth channel
         for message in self.sim.step([command]):
             if message.robot_id == self.robot_id:
                 self.link.publish(message)

@@ -5,12 +5,12 @@ messages are simply used late), sends commands and publishes its status. It star
 every robot has sent a heartbeat, at the pose the heartbeat reports: the start pose on a
 fresh run, the robot's own dead-reckoned pose after a server restart (there is no
 persisted state; the restarted server maps afresh from there). A robot whose heartbeats
-stop for ``heartbeat_timeout_s`` is marked lost (:meth:`Server.mark_lost`) and ignored
-from then on.
+stop for ``heartbeat_timeout_s`` is marked lost
+(:meth:`~acslam.pipeline.server.Server.mark_lost`) and ignored from then on.
 
 The run folder is written like an in-process run's (:func:`acslam.runner.finish_run`);
 ground truth comes from the robots' truth side channel, which only this evaluation
-reads, never the :class:`~acslam.server.Server`. Times are seconds since the server
+reads, never the :class:`~acslam.pipeline.server.Server`. Times are seconds since the server
 started; robot stamps are the robots' own simulated clocks, which start when they first
 hear the server, so the two agree to a few milliseconds.
 """
@@ -27,8 +27,10 @@ import numpy as np
 import yaml
 
 from acslam.messages import RobotMessage
+from acslam.pipeline.server import Server
+from acslam.pipeline.snapshot import Snapshot
 from acslam.runner import (
-    ExploredHistory,
+    RunLog,
     TruthLog,
     failure_reason,
     finish_run,
@@ -36,7 +38,6 @@ from acslam.runner import (
     robot_name,
 )
 from acslam.scenario import Scenario
-from acslam.server import Server, ServerStatus
 from acslam.transport.codec import StatusBeacon, TruthBatch
 from acslam.transport.zenoh_link import ZenohServerEndpoint, open_session
 
@@ -57,8 +58,8 @@ def serve(
     out_dir: Path,
     max_time_s: float,
     options: ServeOptions | None = None,
-    on_progress: Callable[[ServerStatus, float], None] | None = None,
-    on_step: Callable[[Server, float, list[RobotMessage]], None] | None = None,
+    on_progress: Callable[[Snapshot, float, float], None] | None = None,
+    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
 ) -> dict:
     """Serve robots on ``listen`` until explored, all lost, or ``max_time_s``; returns
     the metrics written to ``out_dir``."""
@@ -75,44 +76,49 @@ def serve(
         for robot in missing:
             server.mark_lost(robot, 0.0)
             endpoint.ignore(robot)
-        history = ExploredHistory(server, scenario.world.spec, on_progress)
+        log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
         reason, now_s, started = "time limit", 0.0, time.monotonic()
         try:
             while now_s < max_time_s:
-                _mark_silent_robots_lost(endpoint, server, options.heartbeat_timeout_s, now_s)
-                if len(server.lost) == count:
+                _mark_silent_robots_lost(
+                    endpoint, server, log.last, options.heartbeat_timeout_s, now_s
+                )
+                messages = endpoint.receive()
+                snapshot = server.step(messages, now_s)
+                log.record(snapshot)
+                if len(snapshot.lost) == count:
                     reason = "all robots lost"
                     break
-                messages = endpoint.receive()
-                endpoint.send(server.step(messages, now_s))
-                endpoint.publish_status(StatusBeacon(now_s, server.finished, tuple(server.lost)))
+                endpoint.send(list(snapshot.commands))
+                endpoint.publish_status(
+                    StatusBeacon(now_s, snapshot.finished, tuple(snapshot.lost))
+                )
                 if on_step is not None:
-                    on_step(server, now_s, messages)
-                if server.finished:
+                    on_step(snapshot, messages)
+                if snapshot.finished:
                     reason = "explored"
                     break
-                history.sample(now_s)
+                log.sample_explored(now_s)
                 elapsed = time.monotonic() - started
                 time.sleep(max(0.0, period_s * math.floor(elapsed / period_s + 1) - elapsed))
                 now_s = time.monotonic() - started
         except Exception as exc:  # the run's products must survive any failure
             reason = failure_reason(exc, out_dir)
         wall_time_s = time.monotonic() - started
+        lost = log.last.lost
         for _ in range(FINAL_STATUS_REPEATS):
-            endpoint.publish_status(StatusBeacon(now_s, True, tuple(server.lost)))
+            endpoint.publish_status(StatusBeacon(now_s, True, tuple(lost)))
             time.sleep(0.1)
         truth = _truth_log(endpoint.truth(), scenario)
         extra = {
             "distributed": {
-                "lost_robots": {robot_name(i): t for i, t in sorted(server.lost.items())},
+                "lost_robots": {robot_name(i): t for i, t in sorted(lost.items())},
                 "transport": endpoint.stats_summary(),
             }
         }
-        return finish_run(
-            out_dir, scenario, server, truth, history.history, reason, wall_time_s, now_s, extra
-        )
+        return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, now_s, extra)
     finally:
         session.close()
 
@@ -134,11 +140,15 @@ def _wait_for_robots(
 
 
 def _mark_silent_robots_lost(
-    endpoint: ZenohServerEndpoint, server: Server, timeout_s: float, now_s: float
+    endpoint: ZenohServerEndpoint,
+    server: Server,
+    last: Snapshot,
+    timeout_s: float,
+    now_s: float,
 ) -> None:
     wall = time.monotonic()
     for robot, (heard_s, _) in endpoint.heartbeats().items():
-        if robot not in server.lost and wall - heard_s > timeout_s:
+        if robot not in last.lost and wall - heard_s > timeout_s:
             server.mark_lost(robot, now_s)
             endpoint.ignore(robot)
 

@@ -1,15 +1,12 @@
-"""Figures drawn from ground truth and run outputs (matplotlib lives only here)."""
+"""Figures drawn from ground truth and run outputs (matplotlib lives only under acslam.eval)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
+from acslam.eval.plotting import plt
 from acslam.worlds.world import World
 
 ROBOT_COLOURS = (

@@ -12,6 +12,7 @@ from itertools import combinations
 import numpy as np
 
 from acslam.geometry import wrap_angles
+from acslam.grid import OCCUPIED, UNKNOWN
 
 
 def _interpolate_poses(
@@ -60,8 +61,8 @@ def confusion_rates(true_occupied: np.ndarray, estimated_values: np.ndarray) -> 
     0 free, 100 occupied); unknown cells are not scored. Rates with an empty denominator
     are NaN, which JSON writes as null.
     """
-    known = estimated_values != -1
-    predicted = estimated_values == 100
+    known = estimated_values != UNKNOWN
+    predicted = estimated_values == OCCUPIED
     tp = int(np.count_nonzero(known & predicted & true_occupied))
     tn = int(np.count_nonzero(known & ~predicted & ~true_occupied))
     fp = int(np.count_nonzero(known & predicted & ~true_occupied))
@@ -115,3 +116,20 @@ def timing(finish_times_s: Mapping[str, float]) -> dict[str, object]:
         "total_s": max(times),
         "gap_s": max(times) - min(times),
     }
+
+
+def pairwise_precision_recall(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
+    """Pairwise association scores: of the measurement pairs put on one estimated landmark,
+    the fraction truly one landmark (precision); of the pairs truly one landmark, the
+    fraction put on one estimated landmark (recall)."""
+    _, t_idx = np.unique(truth, return_inverse=True)
+    _, e_idx = np.unique(estimate, return_inverse=True)
+    table = np.zeros((t_idx.max() + 1, e_idx.max() + 1))
+    np.add.at(table, (t_idx, e_idx), 1)
+
+    def pairs(counts: np.ndarray) -> float:
+        return float((counts * (counts - 1) / 2).sum())
+
+    both = pairs(table)
+    est_pairs, true_pairs = pairs(table.sum(axis=0)), pairs(table.sum(axis=1))
+    return (both / est_pairs if est_pairs else 1.0), (both / true_pairs if true_pairs else 1.0)

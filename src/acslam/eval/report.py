@@ -14,15 +14,12 @@ import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
-from acslam.grid import GridSpec
+from acslam.eval.plotting import plt
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 
 # Thesis Fig. 5.12: green TP, white TN, blue FP, red FN (grey: not mapped).
 CONFUSION_COLOURS = {
@@ -99,7 +96,7 @@ class RunRecord:
 
 def _zoom(ax: plt.Axes, record: RunRecord, margin_m: float = 1.0) -> None:
     """Frame the reachable area (the 40 m grids are mostly wall)."""
-    rows, cols = np.nonzero(record.reachable | (record.estimated_values != -1))
+    rows, cols = np.nonzero(record.reachable | (record.estimated_values != UNKNOWN))
     if len(rows) == 0:
         return
     spec = record.spec
@@ -119,8 +116,8 @@ def _zoom(ax: plt.Axes, record: RunRecord, margin_m: float = 1.0) -> None:
 def _map_image(values: np.ndarray) -> np.ndarray:
     """OccupancyGrid values as grey levels: white free, black occupied, grey unknown."""
     image = np.full(values.shape, 0.6)
-    image[values == 0] = 1.0
-    image[values == 100] = 0.0
+    image[values == FREE] = 1.0
+    image[values == OCCUPIED] = 0.0
     return image
 
 
@@ -188,8 +185,8 @@ def confusion_image(true_occupied: np.ndarray, values: np.ndarray) -> np.ndarray
     """RGB image of the confusion classes in the thesis's colours."""
     image = np.empty((*values.shape, 3))
     image[:] = CONFUSION_COLOURS["unknown"]
-    predicted = values == 100
-    known = values != -1
+    predicted = values == OCCUPIED
+    known = values != UNKNOWN
     image[known & predicted & true_occupied] = CONFUSION_COLOURS["tp"]
     image[known & ~predicted & ~true_occupied] = CONFUSION_COLOURS["tn"]
     image[known & predicted & ~true_occupied] = CONFUSION_COLOURS["fp"]

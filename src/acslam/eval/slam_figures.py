@@ -4,13 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from acslam.eval.figures import robot_colour
+from acslam.eval.plotting import plt
+from acslam.grid import FREE, OCCUPIED, GridSpec
 
 
 def plot_slam_run(
@@ -42,4 +40,38 @@ def plot_slam_run(
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _grid_image(values: np.ndarray) -> np.ndarray:
+    return np.select([values == OCCUPIED, values == FREE], [0.0, 1.0], default=0.75)
+
+
+def _draw_map(
+    ax: plt.Axes, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
+) -> None:
+    ax.imshow(
+        _grid_image(values), cmap="gray", origin="lower", extent=spec.extent_m, vmin=0, vmax=1
+    )
+    ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
+    ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
+
+
+def plot_map(path: Path, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str) -> None:
+    """One occupancy map with a trajectory over it."""
+    fig, ax = plt.subplots(figsize=(9, 9))
+    _draw_map(ax, values, spec, track, title)
+    fig.savefig(path, dpi=200, bbox_inches="tight")
+    plt.close(fig)
+
+
+def plot_map_panels(
+    path: Path,
+    panels: list[tuple[np.ndarray, GridSpec, np.ndarray, str]],
+) -> None:
+    """Maps side by side, each ``(values, spec, track, title)``."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
+    for ax, panel in zip(axes, panels, strict=True):
+        _draw_map(ax, *panel)
+    fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)

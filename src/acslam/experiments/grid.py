@@ -21,18 +21,24 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+)
 
 from acslam.config import builtin_scenario_names
-from acslam.errors import ConfigError
+from acslam.errors import ConfigError, PluginError
+from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS, Registry
 
-Planner = Literal["fgp", "dwa"]
-Allocator = Literal["factor-graph", "hungarian", "greedy", "thesis"]
-DEFAULT_PLANNER: Planner = "fgp"
-DEFAULT_ALLOCATOR: Allocator = "factor-graph"
+DEFAULT_PLANNER = LOCAL_PLANNERS.default
+DEFAULT_ALLOCATOR = ALLOCATORS.default
 BUILTIN_GRIDS = ("thesis", "scaling")
 THESIS_EXPERIMENTS = tuple(f"thesis-exp{k}" for k in range(1, 6))
 SCALING_MAX_TIME_S = 2400.0
@@ -45,6 +51,21 @@ def _unique(values: list) -> list:
     return values
 
 
+def _registered(registry: Registry) -> AfterValidator:
+    def check(name: str) -> str:
+        try:
+            registry.get(name)
+        except PluginError as exc:
+            raise ValueError(str(exc)) from None
+        return name
+
+    return AfterValidator(check)
+
+
+PlannerName = Annotated[str, _registered(LOCAL_PLANNERS)]
+AllocatorName = Annotated[str, _registered(ALLOCATORS)]
+
+
 class GridBlock(BaseModel):
     """One cross product of the grid."""
 
@@ -53,8 +74,8 @@ class GridBlock(BaseModel):
     name: str = ""
     scenarios: Annotated[list[str], Field(min_length=1)]
     robots: Annotated[list[Annotated[int, Field(ge=1)]], Field(min_length=1)] = [3]
-    planners: Annotated[list[Planner], Field(min_length=1)] = [DEFAULT_PLANNER]
-    allocators: Annotated[list[Allocator], Field(min_length=1)] = [DEFAULT_ALLOCATOR]
+    planners: Annotated[list[PlannerName], Field(min_length=1)] = [DEFAULT_PLANNER]
+    allocators: Annotated[list[AllocatorName], Field(min_length=1)] = [DEFAULT_ALLOCATOR]
     seeds: Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=1)] = [0]
 
     _check_unique = field_validator("scenarios", "robots", "planners", "allocators", "seeds")(

@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Protocol
 
-from acslam.errors import AcslamError, ConfigError
+from acslam.errors import AcslamError, ConfigError, WallTimeLimitError
 from acslam.experiments.grid import RunSpec
 
 if TYPE_CHECKING:
@@ -47,10 +47,6 @@ class RunResult:
     sim_time_s: float
     wall_time_s: float
     skipped: bool = False
-
-
-class WallTimeLimitError(AcslamError):
-    """Raised from the progress callback to stop a run that uses too much wall time."""
 
 
 class Executor(Protocol):
@@ -78,7 +74,7 @@ def execute_run(spec: RunSpec, folder: Path) -> RunResult:
     started = time.perf_counter()
     stopped: list[str] = []
 
-    def guard(status: object, explored_m2: float) -> None:
+    def guard(snapshot: object, time_s: float, explored_m2: float) -> None:
         limit = spec.wall_time_limit_s
         if limit is not None and time.perf_counter() - started > limit:
             stopped.append(f"wall-clock limit of {limit:g} s exceeded")

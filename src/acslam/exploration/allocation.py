@@ -37,17 +37,21 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import gtsam
 import numpy as np
+from pydantic import Field
 from scipy.optimize import linear_sum_assignment
 
-from acslam.config import AllocationConfig
+from acslam.config import FiniteFloat, NonNegativeFloat, StageParams
+from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.mapping.costmap import Costmap
-from acslam.planning.astar import NoPathError, distances_from, snap_to_free
+from acslam.pipeline.registry import ALLOCATORS
+from acslam.planning.astar import distances_from, snap_to_free
 
 _MIN_LOG_FACTOR = -600.0
 """Factor values below e^-600 are stored as e^-600 (doubles underflow near e^-745)."""
@@ -57,17 +61,15 @@ _MIN_LOG_FACTOR = -600.0
 class Allocation:
     """Which cluster each robot goes to.
 
-    ``cluster_of_robot[i]``: index into the clusters list, or ``None`` (idle: no cluster
-    reachable). ``distances_m``: (robots, clusters) d used, inf where unreachable.
-    ``log_value``: J of the assignment (module docstring). ``solver``: "exact",
-    "approximate", "hungarian" or "greedy".
+    ``allocator``: the plugin's name. ``solver``: "exact", "approximate", "hungarian" or
+    "greedy". ``cluster_of_robot[i]``: index into the clusters list, or ``None`` (idle: no
+    cluster reachable). ``distances_m``: (robots, clusters) d used, inf where unreachable.
     """
 
-    method: str
+    allocator: str
     solver: str
     cluster_of_robot: tuple[int | None, ...]
     distances_m: np.ndarray
-    log_value: float
 
     def status(self, robot: int) -> Literal["assigned", "idle"]:
         return "idle" if self.cluster_of_robot[robot] is None else "assigned"
@@ -242,30 +244,85 @@ def _greedy_nearest(distances_m: np.ndarray) -> list[int | None]:
     return _fill_with_best(assignment, -distances_m)
 
 
-# --------------------------------------------------------------------------- front end
+# --------------------------------------------------------------------------- plugins
+
+DistanceMetric = Literal["path", "euclidean", "euclidean-unchecked"]
+
+
+class TravelParams(StageParams):
+    """How every built-in allocator measures d, the travel to a cluster."""
+
+    # A robot's current goal counts this much closer when re-allocating: switching is
+    # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
+    commitment_m: NonNegativeFloat = 2.0
+    # "path" = costmap path length from one Dijkstra per robot (walls respected;
+    # unreachable clusters excluded), "euclidean" = straight line where a path exists,
+    # "euclidean-unchecked" = straight line, no Dijkstra (the thesis's d).
+    distance_metric: DistanceMetric = "path"
+    # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
+    # metres, the unit alpha is stated in.
+    path_cost_weight: NonNegativeFloat = 0.0
+    # A robot localised in a lethal cell (inflation band) starts from the nearest free
+    # cell within this radius, as the global planner's max_snap_m.
+    start_snap_m: NonNegativeFloat = 0.5
+
+
+class UtilityParams(TravelParams):
+    """Travel against gain: the unary log-factor -alpha d + beta s (eq. 4.40)."""
+
+    # alpha per metre of travel, beta per frontier cell, so with these values 20
+    # frontier cells (1 m at 0.05 m) are worth 1 m.
+    alpha: NonNegativeFloat = 1.0
+    beta: NonNegativeFloat = 0.05
+    # s of eq. 4.40: the cluster's frontier cells ("size"), or the unknown cells within
+    # sensor range of its target ("information_gain", scale beta down accordingly).
+    utility: Literal["size", "information_gain"] = "size"
+
+
+class GreedyParams(TravelParams):
+    name: Literal["greedy"] = "greedy"
+
+
+class HungarianParams(UtilityParams):
+    name: Literal["hungarian"] = "hungarian"
+
+
+class FactorGraphParams(UtilityParams):
+    name: Literal["factor-graph"] = "factor-graph"
+    # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
+    # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
+    # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
+    # sharing whenever there are enough clusters.
+    conflict_lambda: FiniteFloat = 0.01
+    # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
+    # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
+    # (~50 ms) the approximate solver (greedy + pairwise local repair) is used.
+    exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
+
+
+class ThesisParams(FactorGraphParams):
+    """The factor graph as the thesis states it: d is the straight line, unchecked."""
+
+    name: Literal["thesis"] = "thesis"
+    distance_metric: DistanceMetric = "euclidean-unchecked"
 
 
 def cluster_distances_m(
     robot_cells: np.ndarray,
-    clusters: list[FrontierCluster],
+    clusters: Sequence[FrontierCluster],
     costmap: Costmap,
-    config: AllocationConfig,
-    metric: Literal["path", "euclidean", "unchecked-euclidean"],
+    params: TravelParams,
 ) -> np.ndarray:
-    """(robots, clusters) d: Dijkstra path cost per robot, or straight-line metres.
-
-    "euclidean" keeps the straight line only where a path exists; "unchecked-euclidean"
-    is the thesis's d, with no Dijkstra at all.
-    """
+    """(robots, clusters) d: Dijkstra path cost per robot, or straight-line metres."""
     spec = costmap.spec
     cells = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
     targets = np.array([c.target_cell for c in clusters], dtype=np.int64).reshape(-1, 2)
     robots_m = spec.cell_to_world(cells)
     targets_m = spec.cell_to_world(targets)
     euclidean = np.linalg.norm(robots_m[:, None, :] - targets_m[None, :, :], axis=2)
-    if metric == "unchecked-euclidean":
+    if params.distance_metric == "euclidean-unchecked":
         return euclidean
-    max_snap_cells = math.floor(config.start_snap_m / spec.resolution_m)
+    max_snap_cells = math.floor(params.start_snap_m / spec.resolution_m)
     distances = np.full((len(cells), len(targets)), np.inf)
     for i, cell in enumerate(cells):
         try:
@@ -280,60 +337,118 @@ def cluster_distances_m(
                 costmap.lethal,
                 (int(start[0]), int(start[1])),
                 spec.resolution_m,
-                config.path_cost_weight,
+                params.path_cost_weight,
             )
         distances[i] = g[targets[:, 0], targets[:, 1]]
-    if metric == "euclidean":
+    if params.distance_metric == "euclidean":
         return np.where(np.isfinite(distances), euclidean, np.inf)
     return distances
 
 
-def allocate(
+def committed_distances_m(
     robot_cells: np.ndarray,
-    clusters: list[FrontierCluster],
+    clusters: Sequence[FrontierCluster],
     costmap: Costmap,
-    config: AllocationConfig,
-    current: list[int | None] | None = None,
-) -> Allocation:
-    """Assign each robot (``[row, col]`` cells) a cluster with ``config.method``.
-
-    ``current[i]`` is the cluster robot i is heading to, if any: its distance counts
-    ``config.commitment_m`` less, so a robot switches goals only for a clearly better one
-    (without it, re-allocating every few seconds makes robots dither between frontiers).
-    """
-    robots = len(np.asarray(robot_cells).reshape(-1, 2))
-    if config.method == "thesis":
-        metric: Literal["path", "euclidean", "unchecked-euclidean"] = "unchecked-euclidean"
-    else:
-        metric = config.distance_metric
-    if not clusters:
-        empty = np.zeros((robots, 0))
-        return Allocation(config.method, "exact", (None,) * robots, empty, 0.0)
-    distances = cluster_distances_m(robot_cells, clusters, costmap, config, metric)
+    params: TravelParams,
+    current: Sequence[int | None] | None,
+) -> np.ndarray:
+    """d with each robot's current cluster ``params.commitment_m`` closer, so a robot
+    switches goals only for a clearly better one (without it, re-allocating every few
+    seconds makes robots dither between frontiers)."""
+    distances = cluster_distances_m(robot_cells, clusters, costmap, params)
     for robot, cluster in enumerate(current or []):
         if cluster is not None and np.isfinite(distances[robot, cluster]):
-            distances[robot, cluster] = max(0.0, distances[robot, cluster] - config.commitment_m)
-    if config.utility == "size":
+            distances[robot, cluster] = max(0.0, distances[robot, cluster] - params.commitment_m)
+    return distances
+
+
+def _unary(
+    distances_m: np.ndarray, clusters: Sequence[FrontierCluster], params: UtilityParams
+) -> np.ndarray:
+    if params.utility == "size":
         utilities = np.array([c.size_cells for c in clusters], dtype=float)
     else:
         utilities = np.array([c.information_gain_cells for c in clusters], dtype=float)
-    unary = unary_log_factors(distances, utilities, config.alpha, config.beta)
-    active = np.flatnonzero(np.isfinite(unary).any(axis=1))
-    assignment: list[int | None] = [None] * robots
-    if config.method == "hungarian":
-        solver, assignment = "hungarian", _hungarian(unary)
-    elif config.method == "greedy":
-        solver, assignment = "greedy", _greedy_nearest(distances)
-    elif len(active):
-        sub = unary[active]
-        size = joint_assignment_count(sub, config.conflict_lambda)
-        if size <= config.exact_max_joint_assignments:
-            solver, chosen = "exact", solve_exact(sub, config.conflict_lambda)
-        else:
-            solver, chosen = "approximate", solve_approximate(sub, config.conflict_lambda)
-        for i, k in zip(active, chosen, strict=True):
-            assignment[int(i)] = k
-    else:
+    return unary_log_factors(distances_m, utilities, params.alpha, params.beta)
+
+
+class _TravelAllocator:
+    """The front end every built-in allocator shares: d with commitment, then a solver."""
+
+    solver = ""  # what Allocation.solver says when there is nothing to solve
+
+    def __init__(self, params: TravelParams) -> None:
+        self.params = params
+
+    def allocate(
+        self,
+        robot_cells: np.ndarray,
+        clusters: Sequence[FrontierCluster],
+        costmap: Costmap,
+        current: Sequence[int | None] | None = None,
+    ) -> Allocation:
+        if not clusters:
+            robots = len(np.asarray(robot_cells).reshape(-1, 2))
+            return Allocation(
+                self.params.name, self.solver, (None,) * robots, np.zeros((robots, 0))
+            )
+        distances = committed_distances_m(robot_cells, clusters, costmap, self.params, current)
+        solver, assignment = self._solve(distances, clusters)
+        return Allocation(self.params.name, solver, tuple(assignment), distances)
+
+    def _solve(
+        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
+    ) -> tuple[str, list[int | None]]:
+        raise NotImplementedError
+
+
+@ALLOCATORS.register("greedy", GreedyParams)
+class GreedyAllocator(_TravelAllocator):
+    """Nearest robot-cluster pairs first, each cluster once while there are enough."""
+
+    solver = "greedy"
+
+    def _solve(
+        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
+    ) -> tuple[str, list[int | None]]:
+        return self.solver, _greedy_nearest(distances_m)
+
+
+@ALLOCATORS.register("hungarian", HungarianParams)
+class HungarianAllocator(_TravelAllocator):
+    """The best one-to-one assignment of eq. 4.40's unary values (no pairwise term)."""
+
+    solver = "hungarian"
+
+    def _solve(
+        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
+    ) -> tuple[str, list[int | None]]:
+        return self.solver, _hungarian(_unary(distances_m, clusters, self.params))
+
+
+@ALLOCATORS.register("thesis", ThesisParams)
+@ALLOCATORS.register("factor-graph", FactorGraphParams)
+class FactorGraphAllocator(_TravelAllocator):
+    """Eq. 4.37's MAP on a discrete factor graph: exact, or approximate when large."""
+
+    solver = "exact"
+
+    def _solve(
+        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
+    ) -> tuple[str, list[int | None]]:
+        params = self.params
+        unary = _unary(distances_m, clusters, params)
+        active = np.flatnonzero(np.isfinite(unary).any(axis=1))
+        assignment: list[int | None] = [None] * len(unary)
         solver = "exact"
-    value = log_objective(assignment, unary, config.conflict_lambda)
-    return Allocation(config.method, solver, tuple(assignment), distances, value)
+        if len(active):
+            sub = unary[active]
+            if joint_assignment_count(sub, params.conflict_lambda) > (
+                params.exact_max_joint_assignments
+            ):
+                solver, chosen = "approximate", solve_approximate(sub, params.conflict_lambda)
+            else:
+                chosen = solve_exact(sub, params.conflict_lambda)
+            for i, k in zip(active, chosen, strict=True):
+                assignment[int(i)] = k
+        return solver, assignment

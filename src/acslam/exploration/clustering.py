@@ -10,15 +10,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
 from sklearn.cluster import DBSCAN
 
-from acslam.config import ExplorationConfig
-from acslam.grid import GridSpec
+from acslam.config import PositiveFloat, StageParams
+from acslam.grid import UNKNOWN, GridSpec
 from acslam.mapping.costmap import Costmap
+from acslam.pipeline.registry import CLUSTERERS
 
-UNKNOWN_VALUE = -1
+
+class DbscanParams(StageParams):
+    """DBSCAN clustering of frontier cells (thesis §4.5)."""
+
+    name: Literal["dbscan"] = "dbscan"
+    eps_m: PositiveFloat = 0.3
+    min_points: Annotated[int, Field(ge=1)] = 5
+    min_cluster_size: Annotated[int, Field(ge=1)] = 5
+    # Information gain = unknown cells within this radius of a cluster's target cell: the
+    # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
+    information_gain_radius_m: PositiveFloat = 8.0
 
 
 @dataclass(frozen=True)
@@ -46,7 +59,7 @@ class UnknownDiscCounter:
     """
 
     def __init__(self, values: np.ndarray, resolution_m: float, radius_m: float) -> None:
-        unknown = (np.asarray(values) == UNKNOWN_VALUE).astype(np.int32)
+        unknown = (np.asarray(values) == UNKNOWN).astype(np.int32)
         self._prefix = np.zeros((unknown.shape[0], unknown.shape[1] + 1), dtype=np.int32)
         np.cumsum(unknown, axis=1, out=self._prefix[:, 1:])
         radius_cells = radius_m / resolution_m
@@ -74,7 +87,7 @@ def cluster_frontiers(
     values: np.ndarray,
     spec: GridSpec,
     costmap: Costmap,
-    config: ExplorationConfig,
+    params: DbscanParams,
 ) -> list[FrontierCluster]:
     """DBSCAN of the frontier cell centres (metres) into targets, largest cluster first.
 
@@ -82,17 +95,15 @@ def cluster_frontiers(
     Noise points and clusters smaller than ``min_cluster_size`` cells are dropped.
     """
     cells = np.asarray(frontier_cells, dtype=np.int64).reshape(-1, 2)
-    if len(cells) < config.dbscan_min_points:
+    if len(cells) < params.min_points:
         return []
     points_m = spec.cell_to_world(cells)
-    labels = DBSCAN(eps=config.dbscan_eps_m, min_samples=config.dbscan_min_points).fit_predict(
-        points_m
-    )
-    counter = UnknownDiscCounter(values, spec.resolution_m, config.information_gain_radius_m)
+    labels = DBSCAN(eps=params.eps_m, min_samples=params.min_points).fit_predict(points_m)
+    counter = UnknownDiscCounter(values, spec.resolution_m, params.information_gain_radius_m)
     clusters = []
     for label in np.unique(labels[labels >= 0]):
         members = labels == label
-        if members.sum() < config.min_cluster_size:
+        if members.sum() < params.min_cluster_size:
             continue
         member_cells = cells[members]
         centroid_m = points_m[members].mean(axis=0)
@@ -114,3 +125,20 @@ def cluster_frontiers(
         )
     clusters.sort(key=lambda cluster: -cluster.size_cells)
     return clusters
+
+
+@CLUSTERERS.register("dbscan", DbscanParams)
+class DbscanClusterer:
+    """:func:`cluster_frontiers` with the scenario's parameters."""
+
+    def __init__(self, params: DbscanParams) -> None:
+        self.params = params
+
+    @property
+    def linkage_m(self) -> float:
+        return self.params.eps_m
+
+    def cluster(
+        self, frontier_cells: np.ndarray, values: np.ndarray, spec: GridSpec, costmap: Costmap
+    ) -> list[FrontierCluster]:
+        return cluster_frontiers(frontier_cells, values, spec, costmap, self.params)

@@ -52,19 +52,16 @@ its last unknown neighbour.
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numba
 import numpy as np
 from scipy import ndimage
 
-from acslam.config import MappingConfig
-from acslam.grid import GridSpec
+from acslam.config import MappingConfig, StageParams
+from acslam.grid import FREE, NEIGHBOUR_COLS, NEIGHBOUR_ROWS, UNKNOWN, GridSpec
+from acslam.pipeline.registry import FRONTIER_DETECTORS
 
-UNKNOWN_VALUE, FREE_VALUE = -1, 0
-"""OccupancyGrid values (see :mod:`acslam.mapping.occupancy`); anything else is occupied."""
-
-_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
-_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 _EIGHT = np.ones((3, 3), dtype=bool)
 
 
@@ -74,14 +71,14 @@ _EIGHT = np.ones((3, 3), dtype=bool)
 def frontier_mask(values: np.ndarray) -> np.ndarray:
     """Naive full-grid detector: free cells with an unknown in-grid 8-neighbour."""
     values = np.asarray(values)
-    unknown = values == UNKNOWN_VALUE
+    unknown = values == UNKNOWN
     near_unknown = ndimage.binary_dilation(unknown, structure=_EIGHT)
-    return near_unknown & (values == FREE_VALUE)
+    return near_unknown & (values == FREE)
 
 
 def reachable_free_mask(values: np.ndarray, robot_cells: np.ndarray) -> np.ndarray:
     """Free cells 8-connected through free space to a robot cell that is itself free."""
-    free = np.asarray(values) == FREE_VALUE
+    free = np.asarray(values) == FREE
     labels, _ = ndimage.label(free, structure=_EIGHT)
     cells = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
     rows, cols = free.shape
@@ -215,11 +212,11 @@ def _process(
         r = flat // cols
         c = flat - r * cols
         for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
+            rr = r + NEIGHBOUR_ROWS[k]
+            cc = c + NEIGHBOUR_COLS[k]
             if 0 <= rr < rows and 0 <= cc < cols:
                 n_dirty = _mark_dirty(rr * cols + cc, dirty, dirty_flag, n_dirty)
-        if visited[flat] and known[flat] != FREE_VALUE:
+        if visited[flat] and known[flat] != FREE:
             visited[flat] = 0
             removed[n_removed] = flat
             n_removed += 1
@@ -245,8 +242,8 @@ def _process(
         r = removed[i] // cols
         c = removed[i] - r * cols
         for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
+            rr = r + NEIGHBOUR_ROWS[k]
+            cc = c + NEIGHBOUR_COLS[k]
             if 0 <= rr < rows and 0 <= cc < cols:
                 v = rr * cols + cc
                 if visited[v] and mark[v] == 0:
@@ -272,8 +269,8 @@ def _process(
         r = u // cols
         c = u - r * cols
         for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
+            rr = r + NEIGHBOUR_ROWS[k]
+            cc = c + NEIGHBOUR_COLS[k]
             if not (0 <= rr < rows and 0 <= cc < cols):
                 continue
             v = rr * cols + cc
@@ -313,13 +310,13 @@ def _process(
     tail = 0
     for i in range(changed.shape[0]):
         flat = changed[i]
-        if known[flat] != FREE_VALUE or visited[flat]:
+        if known[flat] != FREE or visited[flat]:
             continue
         r = flat // cols
         c = flat - r * cols
         for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
+            rr = r + NEIGHBOUR_ROWS[k]
+            cc = c + NEIGHBOUR_COLS[k]
             if 0 <= rr < rows and 0 <= cc < cols and visited[rr * cols + cc]:
                 visited[flat] = 1
                 label[flat] = _find(parent, label[rr * cols + cc])
@@ -329,7 +326,7 @@ def _process(
                 break
     for i in range(robots.shape[0]):
         flat = robots[i]
-        if flat >= 0 and known[flat] == FREE_VALUE and not visited[flat]:
+        if flat >= 0 and known[flat] == FREE and not visited[flat]:
             new_id = state[0]
             state[0] += 1
             parent[new_id] = new_id
@@ -346,12 +343,12 @@ def _process(
         r = u // cols
         c = u - r * cols
         for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
+            rr = r + NEIGHBOUR_ROWS[k]
+            cc = c + NEIGHBOUR_COLS[k]
             if not (0 <= rr < rows and 0 <= cc < cols):
                 continue
             v = rr * cols + cc
-            if known[v] != FREE_VALUE:
+            if known[v] != FREE:
                 continue
             if not visited[v]:
                 visited[v] = 1
@@ -396,8 +393,8 @@ def _process(
             r = u // cols
             c = u - r * cols
             for k in range(8):
-                rr = r + _DR[k]
-                cc = c + _DC[k]
+                rr = r + NEIGHBOUR_ROWS[k]
+                cc = c + NEIGHBOUR_COLS[k]
                 if 0 <= rr < rows and 0 <= cc < cols and visited[rr * cols + cc]:
                     visited[rr * cols + cc] = 0
                     queue[tail] = rr * cols + cc
@@ -413,9 +410,9 @@ def _process(
             r = flat // cols
             c = flat - r * cols
             for k in range(8):
-                rr = r + _DR[k]
-                cc = c + _DC[k]
-                if 0 <= rr < rows and 0 <= cc < cols and known[rr * cols + cc] == UNKNOWN_VALUE:
+                rr = r + NEIGHBOUR_ROWS[k]
+                cc = c + NEIGHBOUR_COLS[k]
+                if 0 <= rr < rows and 0 <= cc < cols and known[rr * cols + cc] == UNKNOWN:
                     is_frontier = True
                     break
         pos = frontier_pos[flat]
@@ -451,7 +448,7 @@ class EwfdFrontierDetector:
         # sensor and one cell of rounding, so no cell a scan changed is left out.
         self._half_cells = math.ceil(self.active_radius_m / spec.resolution_m) + 2
         n = spec.rows * spec.cols
-        self._known = np.full(spec.shape, UNKNOWN_VALUE, dtype=np.int8)
+        self._known = np.full(spec.shape, UNKNOWN, dtype=np.int8)
         self._visited = np.zeros(n, dtype=np.uint8)
         self._label = np.zeros(n, dtype=np.int64)
         self._parent = np.arange(64, dtype=np.int64)
@@ -563,3 +560,37 @@ class EwfdFrontierDetector:
     def visited_mask(self) -> np.ndarray:
         """The global memory of visited cells (free cells reachable from the robots)."""
         return self._visited.reshape(self.spec.shape).astype(bool)
+
+
+class EwfdParams(StageParams):
+    """EWFD has no parameters of its own: its active area follows the mapper's reach."""
+
+    name: Literal["ewfd"] = "ewfd"
+
+
+class NaiveFrontierParams(StageParams):
+    """The full-grid scan: the reference EWFD is checked against, and a baseline."""
+
+    name: Literal["naive"] = "naive"
+
+
+@FRONTIER_DETECTORS.register("ewfd", EwfdParams)
+def ewfd_detector(
+    params: EwfdParams, *, spec: GridSpec, mapping: MappingConfig
+) -> EwfdFrontierDetector:
+    return EwfdFrontierDetector(spec, active_radius_m(mapping))
+
+
+@FRONTIER_DETECTORS.register("naive", NaiveFrontierParams)
+class NaiveFrontierDetector:
+    """:func:`reachable_frontier_cells` over the whole grid at every update."""
+
+    def __init__(
+        self, params: NaiveFrontierParams, *, spec: GridSpec, mapping: MappingConfig
+    ) -> None:
+        self.params = params
+
+    def update(
+        self, values: np.ndarray, robot_cells: np.ndarray, scan_cells: np.ndarray | None
+    ) -> np.ndarray:
+        return reachable_frontier_cells(values, robot_cells)

@@ -17,8 +17,7 @@ import cv2
 import numpy as np
 
 from acslam.config import CostmapConfig
-from acslam.grid import GridSpec
-from acslam.mapping.occupancy import OCCUPIED, UNKNOWN
+from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window
 
 LETHAL_COST = math.inf
 """Cost of cells the robot's footprint cannot occupy (planners treat them as walls)."""
@@ -73,3 +72,27 @@ def compute_costmap(
     lethal = distance_m <= robot_radius_m
     np.copyto(cost, LETHAL_COST, where=lethal)
     return Costmap(spec, cost, distance_m, lethal)
+
+
+def known_window(values: np.ndarray, spec: GridSpec, margin_m: float) -> Window:
+    """The bounding box of the known cells, grown by ``margin_m`` and clipped to the grid.
+
+    The costmap and the planners work on it, not on the whole grid: early in a run the
+    known area is a small part of the grid, and planning time grows with the cells
+    searched.
+    """
+    rows = np.flatnonzero((values != UNKNOWN).any(axis=1))
+    cols = np.flatnonzero((values != UNKNOWN).any(axis=0))
+    if len(rows) == 0:
+        return Window(0, 0, spec)
+    margin = math.ceil(margin_m / spec.resolution_m)
+    r0, r1 = max(rows[0] - margin, 0), min(rows[-1] + margin + 1, spec.rows)
+    c0, c1 = max(cols[0] - margin, 0), min(cols[-1] + margin + 1, spec.cols)
+    local = GridSpec(
+        spec.origin_x_m + c0 * spec.resolution_m,
+        spec.origin_y_m + r0 * spec.resolution_m,
+        spec.resolution_m,
+        int(r1 - r0),
+        int(c1 - c0),
+    )
+    return Window(int(r0), int(c0), local)

@@ -23,13 +23,11 @@ import numba
 import numpy as np
 
 from acslam.config import MappingConfig
-from acslam.grid import GridSpec, bresenham
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, bresenham
+from acslam.pipeline.registry import MAPPERS
 
 FIXED_POINT_SCALE = float(2**24)
 """Accumulator units per log-odds unit (a power of two, so conversion is exact)."""
-
-UNKNOWN, FREE, OCCUPIED = -1, 0, 100
-"""ROS ``OccupancyGrid`` cell values, as in :mod:`acslam.worlds.mapio`."""
 
 _FREE_BIT, _HIT_BIT, _LISTED_BIT = 1, 2, 4
 
@@ -382,6 +380,7 @@ class _PosedScan:
     range_max_m: float
 
 
+@MAPPERS.register("log-odds", MappingConfig)
 class TeamMap:
     """The global map fused from all robots plus one map per robot, kept in step.
 
@@ -391,12 +390,33 @@ class TeamMap:
     of the robot grids, so the map of any robot combination is available (:meth:`combined`).
     """
 
-    def __init__(self, spec: GridSpec, config: MappingConfig) -> None:
+    def __init__(self, config: MappingConfig, *, spec: GridSpec) -> None:
         self.spec = spec
         self.config = config
         self.global_grid = LogOddsGrid(spec, config)
         self._robot_grids: dict[int, LogOddsGrid] = {}
         self._scans: dict[Hashable, _PosedScan] = {}
+        self._version = 0
+        self._values: tuple[int, np.ndarray] | None = None
+
+    @property
+    def version(self) -> int:
+        """Counts changes to the map: readers compare it to skip unchanged maps."""
+        return self._version
+
+    def occupancy_values(self) -> np.ndarray:
+        """The global grid as read-only OccupancyGrid values, computed once per version."""
+        if self._values is None or self._values[0] != self._version:
+            values = self.global_grid.to_occupancy_values()
+            values.flags.writeable = False
+            self._values = (self._version, values)
+        return self._values[1]
+
+    def known_mask(self) -> np.ndarray:
+        return self.global_grid.known_mask()
+
+    def robot_known_mask(self, robot_id: int) -> np.ndarray:
+        return self.robot_grid(robot_id).known_mask()
 
     def __len__(self) -> int:
         return len(self._scans)
@@ -422,6 +442,7 @@ class TeamMap:
         update = self.global_grid.scan_update(scan.ranges, scan.angles, pose, scan.range_max_m)
         self.global_grid.apply(update, sign)
         self.robot_grid(scan.robot_id).apply(update, sign)
+        self._version += 1
 
     def add_scan(
         self,

@@ -41,7 +41,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -115,15 +114,6 @@ class Keyframe:
     stamp_s: float
     pose: np.ndarray
     scan: PreparedScan
-
-
-class LoopClosure(NamedTuple):
-    """An accepted constraint: ``relative`` is key_b's sensor pose in key_a's frame."""
-
-    key_a: int
-    key_b: int
-    relative: np.ndarray
-    covariance: np.ndarray
 
 
 def _beam_sigmas_m(ranges_m: np.ndarray, config: ScanMatchingConfig) -> tuple[np.ndarray, float]:
@@ -553,17 +543,3 @@ def loop_closure_candidates(
         if keyframes[i].robot_id != keyframes[j].robot_id
         or abs(keyframes[i].stamp_s - keyframes[j].stamp_s) >= config.loop_min_separation_s
     ]
-
-
-def find_loop_closures(
-    keyframes: Sequence[Keyframe], config: ScanMatchingConfig
-) -> list[LoopClosure]:
-    """Match every candidate pair from the estimated poses and keep the verified ones."""
-    closures: list[LoopClosure] = []
-    for i, j in loop_closure_candidates(keyframes, config):
-        first, second = keyframes[i], keyframes[j]
-        guess = between(first.pose, second.pose)
-        result = match_scans(first.scan, second.scan, guess, config)
-        if verify(result, guess, config):
-            closures.append(LoopClosure(first.key, second.key, result.relative, result.covariance))
-    return closures

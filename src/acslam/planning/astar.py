@@ -21,19 +21,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numba
 import numpy as np
 
-from acslam.errors import AcslamError
-from acslam.grid import GridSpec
-
-_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)
-_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
-
-
-class NoPathError(AcslamError):
-    """No collision-free path exists (or start/goal have no free cell nearby)."""
+from acslam.config import NonNegativeFloat, StageParams
+from acslam.errors import NoPathError
+from acslam.grid import NEIGHBOUR_COLS, NEIGHBOUR_ROWS, GridSpec
+from acslam.pipeline.registry import GLOBAL_PLANNERS
 
 
 @dataclass(frozen=True)
@@ -141,11 +137,11 @@ def _search(
         r = node // cols
         c = node - r * cols
         for k in range(8):
-            nr = r + _DR[k]
-            nc = c + _DC[k]
+            nr = r + NEIGHBOUR_ROWS[k]
+            nc = c + NEIGHBOUR_COLS[k]
             if nr < 0 or nr >= rows or nc < 0 or nc >= cols or lethal[nr, nc]:
                 continue
-            diagonal = _DR[k] != 0 and _DC[k] != 0
+            diagonal = NEIGHBOUR_ROWS[k] != 0 and NEIGHBOUR_COLS[k] != 0
             if diagonal and lethal[nr, c] and lethal[r, nc]:
                 continue
             nxt = nr * cols + nc
@@ -359,6 +355,41 @@ def plan_path(
     if shortcut:
         cells = shortcut_cells(cells, lethal)
     return GridPath(cells, grid.cell_to_world(cells), path_cost, shortcut)
+
+
+class AstarParams(StageParams):
+    """The A* global planner (thesis §4.7)."""
+
+    name: Literal["astar"] = "astar"
+    # A* step cost = step length (m) * (1 + cost_weight * cell cost).
+    cost_weight: NonNegativeFloat = 5.0
+    # Start/goal inside lethal cells snap to the nearest free cell within this radius:
+    # a robot localised a few cells into the inflation band must still get a path.
+    max_snap_m: NonNegativeFloat = 0.5
+    # Line-of-sight smoothing of the A* path (shorter in metres; cost no longer optimal).
+    shortcut: bool = True
+
+
+@GLOBAL_PLANNERS.register("astar", AstarParams)
+class AstarPlanner:
+    """:func:`plan_path` with the scenario's weight, snapping and smoothing."""
+
+    def __init__(self, params: AstarParams) -> None:
+        self.params = params
+
+    def plan(
+        self,
+        cost: np.ndarray,
+        lethal: np.ndarray,
+        spec: GridSpec,
+        start_xy_m: np.ndarray,
+        goal_xy_m: np.ndarray,
+    ) -> np.ndarray:
+        p = self.params
+        path = plan_path(
+            cost, lethal, spec, start_xy_m, goal_xy_m, p.cost_weight, p.max_snap_m, p.shortcut
+        )
+        return path.points_m
 
 
 def path_length_m(points_m: np.ndarray) -> float:

@@ -20,15 +20,16 @@ Differences from the thesis text, on purpose:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
 
-from acslam.config import PlanningConfig, RobotsConfig
+from acslam.config import NonNegativeFloat, PlanningConfig, RobotsConfig, StageParams
+from acslam.geometry import wrap_angles
+from acslam.pipeline.registry import LOCAL_PLANNERS
 from acslam.planning.field import DistanceField, RobotState
-
-
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def _clearance_term(distance_m: np.ndarray, influence_m: float) -> np.ndarray:
@@ -52,12 +53,53 @@ def rollout_arcs(
     return np.stack([state.x_m + dx, state.y_m + dy], axis=-1), theta
 
 
-class DynamicWindowPlanner:
-    """Scores sampled ``(v, omega)`` in the dynamic window and returns the best (4.56)."""
+class DwaParams(StageParams):
+    """DWA (eqs. 4.48-4.56): velocity samples and the weights of eq. 4.51."""
 
-    def __init__(self, planning: PlanningConfig, robots: RobotsConfig) -> None:
+    name: Literal["dwa"] = "dwa"
+    v_samples: Annotated[int, Field(ge=2)] = 11
+    omega_samples: Annotated[int, Field(ge=3)] = 21
+    weight_progress: NonNegativeFloat = 1.0
+    weight_heading: NonNegativeFloat = 0.3
+    weight_costmap: NonNegativeFloat = 0.5
+    weight_robot: NonNegativeFloat = 0.5
+    # Each arc is sampled at least this often over T_p (and every half cell).
+    min_rollout_steps: Annotated[int, Field(ge=2)] = 10
+
+
+@LOCAL_PLANNERS.register("dwa", DwaParams)
+class DynamicWindowPlanner:
+    """Scores sampled ``(v, omega)`` in the dynamic window and returns the best (4.56).
+
+    Each robot plans alone; the others enter as constant-velocity predictions.
+    """
+
+    def __init__(
+        self, params: DwaParams, *, planning: PlanningConfig, robots: RobotsConfig
+    ) -> None:
+        self.params = params
         self.planning = planning
         self.robots = robots
+
+    def plan(
+        self,
+        states: Sequence[RobotState],
+        goals_xy_m: Sequence[np.ndarray],
+        field: DistanceField,
+    ) -> list[tuple[float, float]]:
+        """One command per robot, each chosen with the others as moving obstacles."""
+        commands = []
+        for k, state in enumerate(states):
+            others = [s for j, s in enumerate(states) if j != k]
+            xy = np.array([s.xy_m for s in others]).reshape(-1, 2)
+            velocity = np.array(
+                [[s.v_mps * math.cos(s.theta_rad), s.v_mps * math.sin(s.theta_rad)] for s in others]
+            ).reshape(-1, 2)
+            commands.append(self.command(state, goals_xy_m[k], field, xy, velocity))
+        return commands
+
+    def reset(self, robot_id: int) -> None:
+        """DWA keeps nothing between cycles."""
 
     def window(self, v_now_mps: float, omega_now_radps: float) -> tuple[float, ...]:
         """``(v_lo, v_hi, omega_lo, omega_hi)`` reachable within one control period.
@@ -79,8 +121,8 @@ class DynamicWindowPlanner:
 
     def _candidates(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         v_lo, v_hi, w_lo, w_hi = self.window(state.v_mps, state.omega_radps)
-        vs = np.linspace(v_lo, v_hi, self.planning.dwa_v_samples)
-        ws = np.linspace(w_lo, w_hi, self.planning.dwa_omega_samples)
+        vs = np.linspace(v_lo, v_hi, self.params.v_samples)
+        ws = np.linspace(w_lo, w_hi, self.params.omega_samples)
         extra_w = [w for w in (0.0, state.omega_radps) if w_lo <= w <= w_hi]
         ws = np.unique(np.concatenate([ws, extra_w]))
         v_grid, w_grid = np.meshgrid(vs, ws, indexing="ij")
@@ -99,11 +141,11 @@ class DynamicWindowPlanner:
         ``others_xy_m`` (M, 2) and ``others_velocity_mps`` (M, 2) describe the other
         robots, predicted at constant velocity over the horizon.
         """
-        p = self.planning
+        p, weights = self.planning, self.params
         radius = self.robots.radius_m
         v, w = self._candidates(state)
         reach_m = self.robots.max_v_mps * p.horizon_s
-        steps = max(p.horizon_steps, math.ceil(reach_m / (0.5 * field.grid.resolution_m)))
+        steps = max(weights.min_rollout_steps, math.ceil(reach_m / (0.5 * field.grid.resolution_m)))
         times = np.linspace(p.horizon_s / steps, p.horizon_s, steps)
         xy, theta = rollout_arcs(state, v, w, times)
 
@@ -127,12 +169,13 @@ class DynamicWindowPlanner:
         d_end = np.linalg.norm(goal - end, axis=1)
         progress = 1.0 - d_end / max(d_now, 1e-6)
         bearing = np.arctan2(goal[1] - end[:, 1], goal[0] - end[:, 0])
-        heading = np.where(d_end > 1e-6, 1.0 - np.abs(_wrap(bearing - theta[:, -1])) / np.pi, 1.0)
+        heading_error = np.abs(wrap_angles(bearing - theta[:, -1]))
+        heading = np.where(d_end > 1e-6, 1.0 - heading_error / np.pi, 1.0)
         score = (
-            p.dwa_weight_progress * progress
-            + p.dwa_weight_heading * heading
-            + p.dwa_weight_costmap * _clearance_term(clearance, p.obstacle_influence_m)
-            + p.dwa_weight_robot * robot_term
+            weights.weight_progress * progress
+            + weights.weight_heading * heading
+            + weights.weight_costmap * _clearance_term(clearance, p.obstacle_influence_m)
+            + weights.weight_robot * robot_term
         )
         if collides.all():
             v_lo, _, w_lo, w_hi = self.window(state.v_mps, state.omega_radps)

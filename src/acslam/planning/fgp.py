@@ -3,10 +3,10 @@
 One GTSAM graph per control cycle holds every robot's states ``[x, y, vx, vy]`` at steps
 ``0..N`` (``dt = T_p / N``), keyed ``robot * (N + 1) + step``:
 
-* start prior (4.59): tight on the measured position, ``fgp_start_sigma_mps`` on the
+* start prior (4.59): tight on the measured position, ``start_sigma_mps`` on the
   current velocity (the velocity may change by about one acceleration step);
 * constant-velocity dynamics (4.60-4.62), linear;
-* goal prior (4.68) on the last position at the lookahead point, ``fgp_goal_sigma_m``;
+* goal prior (4.68) on the last position at the lookahead point, ``goal_sigma_m``;
   the last velocity is left almost free (sigma 10 m/s);
 * obstacle factors (4.63-4.64), ``e = max(0, 1 - d / d_max^obs)`` with ``d`` the
   bilinearly interpolated distance field, and inter-robot factors (4.65-4.66),
@@ -17,7 +17,7 @@ Speed: GTSAM's ``CustomFactor`` calls back into Python once per factor and itera
 which cost 77 ms per cycle for 8 robots. Instead we run Levenberg-Marquardt ourselves
 (GTSAM's schedule: lambda x10 on a rejected step, /10 on an accepted one, but from 1e-3;
 stop when an accepted step lowers the cost by less than 1e-3 of it, or after
-``fgp_max_iterations`` linear solves; against 1e-5 for both, measured on
+``max_iterations`` linear solves; against 1e-5 for both, measured on
 ``benchmarks/planning_speed.py``, this halves the solves for 3 robots and changes no
 closed-loop test outcome). Each iteration evaluates every residual and Jacobian at once
 in NumPy (:func:`obstacle_errors`, :func:`robot_errors`) and hands GTSAM one
@@ -30,7 +30,7 @@ the cost and is rejected.
 Warm-started from the previous cycle's solution shifted by one step and translated onto
 the measured position. A symmetric head-on meeting is a saddle of eq. 4.69 where both
 robots would just stop, so when building the initial guess a robot that has another one
-dead ahead is nudged ``fgp_keep_right_m`` to its right.
+dead ahead is nudged ``keep_right_m`` to its right.
 
 Commands (4.70-4.71): ``v = |p_1 - p_0| / dt``; the heading to reach is the direction of
 ``p_1 - p_0`` (toward the goal when that displacement is negligible, unchanged within one
@@ -46,11 +46,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Annotated, Literal
 
 import gtsam
 import numpy as np
+from pydantic import Field
 
-from acslam.config import PlanningConfig, RobotsConfig
+from acslam.config import NonNegativeFloat, PlanningConfig, PositiveFloat, RobotsConfig, StageParams
+from acslam.geometry import wrap_angle
+from acslam.pipeline.registry import LOCAL_PLANNERS
 from acslam.planning.field import DistanceField, RobotState
 
 _FREE_VELOCITY_SIGMA_MPS = 10.0
@@ -60,10 +64,6 @@ _LAMBDA_MAX = 1e5
 _LAMBDA_MIN = 1e-10
 _RELATIVE_TOLERANCE = 1e-3
 _ABSOLUTE_TOLERANCE = 1e-5
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def obstacle_errors(
@@ -113,23 +113,49 @@ class FgpProblem:
     field: DistanceField
 
 
+class FgpParams(StageParams):
+    """The joint factor-graph planner (eqs. 4.59-4.71).
+
+    Sigmas: start position is the measured pose (tight); start velocity may change by
+    about one acceleration step; dynamics position sigma keeps the states kinematically
+    consistent, the velocity sigma is ~max_acc * dt.
+    """
+
+    name: Literal["fgp"] = "fgp"
+    horizon_steps: Annotated[int, Field(ge=2)] = 10  # N, dt = T_p / N = 0.2 s
+    start_sigma_m: PositiveFloat = 0.001
+    start_sigma_mps: PositiveFloat = 0.05
+    dynamics_sigma_m: PositiveFloat = 0.005
+    dynamics_sigma_mps: PositiveFloat = 0.1
+    goal_sigma_m: PositiveFloat = 0.2  # moderate: the goal may yield to obstacles
+    obstacle_sigma: PositiveFloat = 0.1  # unitless error 1 - d / d_max
+    robot_sigma: PositiveFloat = 0.05  # unitless error 1 - d / d_max
+    # Cap on Levenberg-Marquardt linear solves per cycle (accepted and rejected steps).
+    max_iterations: Annotated[int, Field(ge=1)] = 20
+    # Sideways nudge of the initial guess when another robot is dead ahead: a symmetric
+    # head-on meeting is a saddle of eq. 4.69 where both robots would stop; both keep right.
+    keep_right_m: NonNegativeFloat = 0.1
+
+
+@LOCAL_PLANNERS.register("fgp", FgpParams)
 class FactorGraphPlanner:
     """Receding-horizon joint planner; keeps each robot's last solution for warm starts."""
 
-    def __init__(self, planning: PlanningConfig, robots: RobotsConfig) -> None:
+    def __init__(
+        self, params: FgpParams, *, planning: PlanningConfig, robots: RobotsConfig
+    ) -> None:
+        self.params = params
         self.planning = planning
         self.robots = robots
-        self.steps = planning.horizon_steps
-        self.dt_s = planning.horizon_s / planning.horizon_steps
+        self.steps = params.horizon_steps
+        self.dt_s = planning.horizon_s / params.horizon_steps
         self._previous: dict[int, np.ndarray] = {}
-        p = planning
+        p = params
         # Whitening: residuals and Jacobians are divided by their sigmas in NumPy, so
         # every JacobianFactor carries a unit noise model.
-        self._start_sigma = np.array([p.fgp_start_sigma_m] * 2 + [p.fgp_start_sigma_mps] * 2)
-        self._dynamics_sigma = np.array(
-            [p.fgp_dynamics_sigma_m] * 2 + [p.fgp_dynamics_sigma_mps] * 2
-        )
-        self._goal_sigma = np.array([p.fgp_goal_sigma_m] * 2 + [_FREE_VELOCITY_SIGMA_MPS] * 2)
+        self._start_sigma = np.array([p.start_sigma_m] * 2 + [p.start_sigma_mps] * 2)
+        self._dynamics_sigma = np.array([p.dynamics_sigma_m] * 2 + [p.dynamics_sigma_mps] * 2)
+        self._goal_sigma = np.array([p.goal_sigma_m] * 2 + [_FREE_VELOCITY_SIGMA_MPS] * 2)
         # x_{i+1} = F x_i: position advances by velocity * dt, velocity is constant.
         self._transition = np.eye(4)
         self._transition[0, 2] = self._transition[1, 3] = self.dt_s
@@ -188,9 +214,18 @@ class FactorGraphPlanner:
             other & close & (ahead > 0.0) & (np.abs(lateral) < 2.0 * self.robots.radius_m)
         ).any(axis=1) & moving[:, None]
         right = np.stack([forward[:, 1], -forward[:, 0]], axis=1)
-        guesses[:, 1:, :2] += self.planning.fgp_keep_right_m * blocked[..., None] * right[:, None]
+        guesses[:, 1:, :2] += self.params.keep_right_m * blocked[..., None] * right[:, None]
 
     def plan(
+        self,
+        states: Sequence[RobotState],
+        goals_xy_m: Sequence[np.ndarray],
+        field: DistanceField,
+    ) -> list[tuple[float, float]]:
+        """``(v, omega)`` per robot (:meth:`solve` for the trajectories too)."""
+        return self.solve(states, goals_xy_m, field).commands
+
+    def solve(
         self,
         states: Sequence[RobotState],
         goals_xy_m: Sequence[np.ndarray],
@@ -237,8 +272,8 @@ class FactorGraphPlanner:
             (x[:, 0] - problem.starts) / self._start_sigma,
             (x[:, 1:] - x[:, :-1] @ self._transition.T) / self._dynamics_sigma,
             (x[:, -1] - goal) / self._goal_sigma,
-            obstacle / p.fgp_obstacle_sigma,
-            robot / p.fgp_robot_sigma,
+            obstacle / self.params.obstacle_sigma,
+            robot / self.params.robot_sigma,
         ]
 
     def cost(self, problem: FgpProblem, x: np.ndarray) -> float:
@@ -274,20 +309,20 @@ class FactorGraphPlanner:
             positions.reshape(-1, 2), problem.field, p.obstacle_influence_m
         )
         jac4 = np.zeros((len(error), 1, 4))
-        jac4[:, 0, :2] = jac / p.fgp_obstacle_sigma
+        jac4[:, 0, :2] = jac / self.params.obstacle_sigma
         for flat in np.flatnonzero(error > 0.0):
             r, i = divmod(int(flat), n)
-            b = np.array([-error[flat] / p.fgp_obstacle_sigma])
+            b = np.array([-error[flat] / self.params.obstacle_sigma])
             graph.add(gtsam.JacobianFactor(self._key(r, i + 1), jac4[flat], b, unit1))
         first, second = np.triu_indices(count, 1)
         error, jac = robot_errors(
             positions[first].reshape(-1, 2), positions[second].reshape(-1, 2), p.robot_influence_m
         )
         jac4 = np.zeros((len(error), 1, 4))
-        jac4[:, 0, :2] = jac / p.fgp_robot_sigma
+        jac4[:, 0, :2] = jac / self.params.robot_sigma
         for flat in np.flatnonzero(error > 0.0):
             pair, i = divmod(int(flat), n)
-            b = np.array([-error[flat] / p.fgp_robot_sigma])
+            b = np.array([-error[flat] / self.params.robot_sigma])
             graph.add(
                 gtsam.JacobianFactor(
                     self._key(int(first[pair]), i + 1),
@@ -319,10 +354,10 @@ class FactorGraphPlanner:
         damping = _LAMBDA_INITIAL
         solves = 0
         new_cost = cost
-        while solves < self.planning.fgp_max_iterations and cost > _ABSOLUTE_TOLERANCE:
+        while solves < self.params.max_iterations and cost > _ABSOLUTE_TOLERANCE:
             linear = self.linearize(problem, x)
             accepted = False
-            while solves < self.planning.fgp_max_iterations:
+            while solves < self.params.max_iterations:
                 graph = linear.clone()
                 block = math.sqrt(damping) * np.eye(4)
                 for key in keys:
@@ -358,7 +393,7 @@ class FactorGraphPlanner:
             heading = math.atan2(displacement[1], displacement[0])
         else:
             heading = math.atan2(to_goal[1], to_goal[0])
-        heading_error = _wrap(heading - state.theta_rad)
+        heading_error = wrap_angle(heading - state.theta_rad)
         v = step_m / self.dt_s * max(0.0, math.cos(heading_error))
         omega = heading_error / self.dt_s
         period = self.planning.control_period_s

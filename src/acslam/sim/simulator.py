@@ -193,6 +193,12 @@ class Simulator:
     def robot_count(self) -> int:
         return len(self._robots)
 
+    def place_robot(self, robot_id: int, pose: tuple[float, float, float]) -> None:
+        """Put a robot at ``[x, y, theta]``: a process that simulates one robot of a team
+        places the others where their own processes report them."""
+        robot = self._robots[robot_id]
+        robot.x_m, robot.y_m, robot.theta_rad = pose
+
     @property
     def ground_truth(self) -> GroundTruth:
         """The evaluation interface; whatever drives the robots must not read it."""

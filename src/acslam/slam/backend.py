@@ -28,7 +28,7 @@ import gtsam
 import numpy as np
 
 from acslam.config import SlamConfig
-from acslam.errors import AcslamError
+from acslam.errors import SlamError
 from acslam.geometry import between, compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
 from acslam.slam import keys
@@ -61,10 +61,6 @@ _POSE_CHAR_CODE = ord(keys.POSE_CHAR)
 def inverse(pose: np.ndarray) -> np.ndarray:
     """SE(2) inverse of ``[x, y, theta]``."""
     return between(pose, np.zeros(3))
-
-
-class SlamError(AcslamError):
-    """The optimiser failed (e.g. an indeterminant linear system); names the operation."""
 
 
 @dataclass(frozen=True)

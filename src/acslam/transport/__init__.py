@@ -11,15 +11,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Protocol
 
-from acslam.errors import AcslamError
 from acslam.messages import RobotMessage, VelocityCommand
 
-TOPICS = ("odom", "scan", "landmarks", "cmd_vel", "heartbeat", "truth")
 STATUS_KEY = "acslam/server/status"
-
-
-class TransportError(AcslamError):
-    """A bad endpoint, fault setting or robot id given to a distributed node."""
 
 
 def robot_key(robot_id: int, topic: str) -> str:

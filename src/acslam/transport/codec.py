@@ -24,15 +24,11 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from acslam.errors import MessageError
+from acslam.errors import CodecError, MessageError
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, VelocityCommand
 
 FORMAT_VERSION = 1
 _DTYPES = {"<f8": np.dtype("<f8"), "|u1": np.dtype("u1"), "<i8": np.dtype("<i8")}
-
-
-class CodecError(MessageError):
-    """A payload that cannot be decoded into a valid message."""
 
 
 def _finite_pose(kind: str, pose: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ loss costs samples, not motion.
 
 ``truth`` is the simulation's ground-truth side channel: the other robot simulators read
 it so their LiDAR sees this robot, and the run's evaluation records it. The
-:class:`~acslam.server.Server` never gets it. Fault injection (drop rate, latency) hits
+:class:`~acslam.pipeline.server.Server` never gets it. Fault injection (drop rate, latency) hits
 only the sensor topics the server localizes from.
 """
 
@@ -31,7 +31,7 @@ from functools import partial
 import numpy as np
 import zenoh
 
-from acslam.errors import MessageError
+from acslam.errors import MessageError, TransportError
 from acslam.geometry import between, compose
 from acslam.messages import (
     LandmarkObservations,
@@ -40,7 +40,7 @@ from acslam.messages import (
     RobotMessage,
     VelocityCommand,
 )
-from acslam.transport import STATUS_KEY, TransportError, robot_key
+from acslam.transport import STATUS_KEY, robot_key
 from acslam.transport.codec import (
     CodecError,
     Heartbeat,

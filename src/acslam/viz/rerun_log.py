@@ -20,20 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-from acslam.errors import AcslamError
+from acslam.errors import VizError
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan, RobotMessage
+from acslam.pipeline.snapshot import Snapshot
 from acslam.scenario import Scenario
-from acslam.server import Server
 
 try:
     import rerun as rr
 except ImportError:  # pragma: no cover - depends on the installed extras
     rr = None
-
-
-class VizError(AcslamError):
-    """The live view cannot start."""
 
 
 class RerunLogger:
@@ -68,19 +64,20 @@ class RerunLogger:
                 ) from None
         self.recording.send_property("scenario", rr.AnyValues(name=scenario.config.name))
 
-    def log_step(self, server: Server, now_s: float, messages: list[RobotMessage]) -> None:
-        """Log the server's state after a step on ``messages``."""
+    def log_step(self, snapshot: Snapshot, messages: list[RobotMessage]) -> None:
+        """Log the server's snapshot after a step on ``messages``."""
         rec = self.recording
+        now_s = snapshot.time_s
         rec.set_time("sim", duration=now_s)
         for message in messages:
             if isinstance(message, LidarScan):
                 self._last_scans[message.robot_id] = message
-        poses = np.array([server.slam.latest_pose(i) for i in range(self.robot_count)])
-        for i, task in enumerate(server.tasks):
+        poses = snapshot.poses
+        for i, path_m in enumerate(snapshot.paths_m):
             base = f"world/robots/robot_{i}"
             rec.log(f"{base}/pose", rr.Points2D(poses[i : i + 1, :2], radii=0.1))
-            if task.path_m is not None:
-                rec.log(f"{base}/path", rr.LineStrips2D([task.path_m]))
+            if path_m is not None:
+                rec.log(f"{base}/path", rr.LineStrips2D([path_m]))
             else:
                 rec.log(f"{base}/path", rr.Clear(recursive=False))
         if now_s >= self._next_scan_s:
@@ -89,21 +86,21 @@ class RerunLogger:
                 rec.log(f"world/robots/robot_{i}/scan", rr.Points2D(_returns(scan, poses[i])))
         if now_s >= self._next_map_s:
             self._next_map_s = now_s + self.map_period_s
-            self._log_maps(server, poses)
+            self._log_maps(snapshot)
 
-    def _log_maps(self, server: Server, poses: np.ndarray) -> None:
+    def _log_maps(self, snapshot: Snapshot) -> None:
         rec = self.recording
-        values = server.team_map.global_grid.to_occupancy_values()
-        view = server.costmap
-        if view is not None:
-            costmap, window = view
+        poses = snapshot.poses
+        values = snapshot.map.occupancy_values()
+        costmap, window = snapshot.costmap, snapshot.window
+        if costmap is not None and window is not None:
             rec.log("world/map", _grid(window.crop(values).view(np.uint8), window.spec, "RvizMap"))
             cost = np.where(costmap.lethal, 100.0, np.minimum(costmap.cost, 1.0) * 99.0)
             rec.log("world/costmap", _grid(cost.astype(np.uint8), window.spec, "RvizCostmap"))
-        cells = server.frontier_cells
+        cells = snapshot.frontier_cells
         if len(cells):
             rec.log("world/frontiers", rr.Points2D(self.spec.cell_to_world(cells), radii=0.03))
-        goals = [(i, task.cluster.target_m) for i, task in enumerate(server.tasks) if task.cluster]
+        goals = [(i, goal) for i, goal in enumerate(snapshot.goals_m) if goal is not None]
         rec.log(
             "world/allocations",
             rr.Arrows2D(
@@ -113,7 +110,7 @@ class RerunLogger:
             ),
         )
         for i in range(self.robot_count):
-            _, trajectory = server.slam.trajectory(i)
+            _, trajectory = snapshot.localization.trajectory(i)
             rec.log(f"world/robots/robot_{i}/trajectory", rr.LineStrips2D([trajectory[:, :2]]))
 
     def close(self) -> None:

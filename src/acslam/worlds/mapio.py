@@ -15,10 +15,9 @@ import yaml
 from PIL import Image, UnidentifiedImageError
 
 from acslam.errors import DataError
-from acslam.grid import GridSpec
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from acslam.worlds.world import World
 
-UNKNOWN, FREE, OCCUPIED = -1, 0, 100
 _PIXEL = {OCCUPIED: 0, FREE: 254, UNKNOWN: 205}
 _OCCUPIED_THRESH = 0.65
 _FREE_THRESH = 0.196

@@ -25,10 +25,6 @@ import math
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from acslam.config import MappingConfig, ScanMatchingConfig, SlamConfig
@@ -39,8 +35,9 @@ from acslam.datasets.carmen import (
     read_carmen,
 )
 from acslam.errors import DataError
+from acslam.eval.slam_figures import plot_map, plot_map_panels
 from acslam.geometry import between, compose
-from acslam.grid import GridSpec
+from acslam.grid import FREE, OCCUPIED, GridSpec
 from acslam.mapping.occupancy import LogOddsGrid, TeamMap, grid_spec_for_bounds
 from acslam.messages import LidarScan, OdometryIncrement
 from acslam.slam.backend import SlamBackend
@@ -165,47 +162,13 @@ def _map_spec(scans: list[LaserRecord], poses: list[np.ndarray], config: Mapping
     )
 
 
-def _grid_image(values: np.ndarray) -> np.ndarray:
-    return np.select([values == 100, values == 0], [0.0, 1.0], default=0.75)
-
-
-def _draw_map(
-    ax: plt.Axes, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
-) -> None:
-    ax.imshow(
-        _grid_image(values), cmap="gray", origin="lower", extent=spec.extent_m, vmin=0, vmax=1
-    )
-    ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
-    ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
-
-
-def _plot_map(
-    path: Path, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
-) -> None:
-    fig, ax = plt.subplots(figsize=(9, 9))
-    _draw_map(ax, values, spec, track, title)
-    fig.savefig(path, dpi=200, bbox_inches="tight")
-    plt.close(fig)
-
-
-def _plot_comparison(
-    path: Path,
-    panels: list[tuple[np.ndarray, GridSpec, np.ndarray, str]],
-) -> None:
-    fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
-    for ax, panel in zip(axes, panels, strict=True):
-        _draw_map(ax, *panel)
-    fig.savefig(path, dpi=150, bbox_inches="tight")
-    plt.close(fig)
-
-
 def _build_map(
     scans: list[LaserRecord], poses: list[np.ndarray], config: MappingConfig
 ) -> tuple[np.ndarray, GridSpec, float]:
     """Occupancy values of every scan at the given poses, their grid, and the time taken."""
     spec = _map_spec(scans, poses, config)
     start = time.perf_counter()
-    team = TeamMap(spec, config)
+    team = TeamMap(config, spec=spec)
     for scan, pose in zip(scans, poses, strict=True):
         team.add_scan(0, scan.line, scan.ranges_m, scan.angles_rad, pose)
     return team.global_grid.to_occupancy_values(), spec, time.perf_counter() - start
@@ -251,10 +214,10 @@ def run_carmen(
 
     values, spec, mapping_s = _build_map(used, poses, mapping_config)
     save_map(out_dir / "map", values, spec)
-    _plot_map(out_dir / "map.png", values, spec, track, f"{Path(path).name}: SLAM map")
+    plot_map(out_dir / "map.png", values, spec, track, f"{Path(path).name}: SLAM map")
     if odometry_map:
         odom_values, odom_spec, odom_track = _odometry_map(used, mapping_config)
-        _plot_comparison(
+        plot_map_panels(
             out_dir / "odometry_vs_slam.png",
             [
                 (odom_values, odom_spec, odom_track, "odometry only"),
@@ -301,8 +264,8 @@ def run_carmen(
             "rows": spec.rows,
             "cols": spec.cols,
             "origin_m": [spec.origin_x_m, spec.origin_y_m],
-            "occupied_cells": int((values == 100).sum()),
-            "free_cells": int((values == 0).sum()),
+            "occupied_cells": int((values == OCCUPIED).sum()),
+            "free_cells": int((values == FREE).sum()),
         },
     }
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))

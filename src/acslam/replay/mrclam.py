@@ -20,6 +20,7 @@ from scipy.optimize import linear_sum_assignment
 
 from acslam.config import SlamConfig
 from acslam.datasets.mrclam import MrclamData, read_mrclam
+from acslam.eval.metrics import pairwise_precision_recall
 from acslam.eval.slam_figures import plot_slam_run
 from acslam.geometry import compose, wrap_angles
 from acslam.messages import LandmarkObservations
@@ -88,23 +89,6 @@ def _pooled(per_robot: dict[int, tuple[np.ndarray, np.ndarray]]) -> dict[str, fl
     pooled = _errors(est, truth)
     pooled.pop("final_position_error_m")
     return pooled
-
-
-def pairwise_precision_recall(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
-    """Pairwise association scores: of the measurement pairs put on one estimated landmark,
-    the fraction truly one landmark (precision); of the pairs truly one landmark, the
-    fraction put on one estimated landmark (recall)."""
-    _, t_idx = np.unique(truth, return_inverse=True)
-    _, e_idx = np.unique(estimate, return_inverse=True)
-    table = np.zeros((t_idx.max() + 1, e_idx.max() + 1))
-    np.add.at(table, (t_idx, e_idx), 1)
-
-    def pairs(counts: np.ndarray) -> float:
-        return float((counts * (counts - 1) / 2).sum())
-
-    both = pairs(table)
-    est_pairs, true_pairs = pairs(table.sum(axis=0)), pairs(table.sum(axis=1))
-    return (both / est_pairs if est_pairs else 1.0), (both / true_pairs if true_pairs else 1.0)
 
 
 def geometric_association_ceiling(data: MrclamData, config: SlamConfig) -> dict[str, float]:

@@ -25,8 +25,8 @@ from acslam.datasets.carmen import CarmenWarning
 from acslam.geometry import compose, wrap_angles
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan, OdometryIncrement, VelocityCommand
+from acslam.replay.carmen import run_carmen
 from acslam.sim.simulator import Simulator
-from acslam.slam.carmen_eval import run_carmen
 from acslam.trajectory import read_tum
 from acslam.worlds.mapio import load_map
 from acslam.worlds.world import World

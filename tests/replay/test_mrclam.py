@@ -13,12 +13,9 @@ import pytest
 from acslam.config import SlamConfig
 from acslam.datasets.mrclam import integrate_arc, read_mrclam, read_table
 from acslam.errors import DataError
+from acslam.eval.metrics import pairwise_precision_recall
 from acslam.messages import LandmarkObservations
-from acslam.slam.mrclam_eval import (
-    geometric_association_ceiling,
-    pairwise_precision_recall,
-    run_mrclam,
-)
+from acslam.replay.mrclam import geometric_association_ceiling, run_mrclam
 
 DATASET = "datasets/mrclam_dataset7"
 HEADER = "# synthetic\n# for tests\n# format as MRCLAM\n# columns\n"

@@ -1,0 +1,145 @@
+"""Name -> plugin registries, one per pipeline stage kind.
+
+A plugin is a class implementing the stage's protocol (:mod:`acslam.pipeline.stages`)
+plus the pydantic model of its parameters. It registers under a name with a decorator::
+
+    @ALLOCATORS.register("nearest", NearestParams)
+    class NearestAllocator: ...
+
+and a scenario picks it by that name, ``algorithms.allocator: {name: nearest, ...}``; the
+section is validated by the plugin's own ``Params``. The built-in plugins live in the
+modules of :data:`BUILTIN_PLUGIN_MODULES`; a third-party package adds its own by naming a
+module in the ``acslam.plugins`` entry-point group, which is imported on first lookup.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from typing import Any, TypeVar
+
+from acslam.config import StageParams
+from acslam.errors import PluginError
+from acslam.pipeline import stages
+
+ENTRY_POINT_GROUP = "acslam.plugins"
+
+BUILTIN_PLUGIN_MODULES = (
+    "acslam.slam.localizer",
+    "acslam.mapping.occupancy",
+    "acslam.exploration.frontiers",
+    "acslam.exploration.clustering",
+    "acslam.exploration.allocation",
+    "acslam.planning.astar",
+    "acslam.planning.dwa",
+    "acslam.planning.fgp",
+)
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Plugin:
+    """One registered implementation of a stage."""
+
+    kind: str
+    name: str
+    factory: Callable[..., Any]
+    params: type[StageParams]
+
+
+class Registry:
+    """The plugins of one stage kind, e.g. every allocator."""
+
+    def __init__(self, kind: str, default: str, protocol: type) -> None:
+        self.kind = kind
+        self.default = default
+        self.protocol = protocol
+        self._plugins: dict[str, Plugin] = {}
+
+    def register(self, name: str, params: type[StageParams]) -> Callable[[T], T]:
+        """Decorator: register the decorated class as the ``name`` plugin of this kind."""
+        declared = params.model_fields["name"].default
+        if declared != name:
+            raise PluginError(f"{self.kind} {name!r}: its Params model declares name {declared!r}")
+
+        def decorate(factory: T) -> T:
+            existing = self._plugins.get(name)
+            if existing is not None and existing.factory is not factory:
+                raise PluginError(f"{self.kind} {name!r} is registered twice")
+            self._plugins[name] = Plugin(self.kind, name, factory, params)  # type: ignore[arg-type]
+            return factory
+
+        return decorate
+
+    def unregister(self, name: str) -> None:
+        """Remove a plugin (for tests that register their own)."""
+        self._plugins.pop(name, None)
+
+    def get(self, name: str) -> Plugin:
+        load_plugins()
+        try:
+            return self._plugins[name]
+        except KeyError:
+            raise PluginError(
+                f"unknown {self.kind} {name!r} (registered: {', '.join(self.names())})"
+            ) from None
+
+    def names(self) -> list[str]:
+        """The registered names, sorted: CLI choices and config validation use these."""
+        load_plugins()
+        return sorted(self._plugins)
+
+    def default_params(self) -> StageParams:
+        return self.get(self.default).params()
+
+    def create(self, params: StageParams, **context: Any) -> Any:
+        """An instance of the plugin ``params.name``, built from its params and the
+        stage's context (what the protocol's docstring lists)."""
+        return self.get(params.name).factory(params, **context)
+
+
+_loaded = False
+
+
+def load_plugins() -> None:
+    """Import the built-in plugin modules and every ``acslam.plugins`` entry point, once."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    for module in BUILTIN_PLUGIN_MODULES:
+        importlib.import_module(module)
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            entry.load()
+        except Exception as exc:
+            raise PluginError(
+                f"entry point {entry.name!r} ({entry.value}) of group {ENTRY_POINT_GROUP!r} "
+                f"cannot be loaded: {type(exc).__name__}: {exc}"
+            ) from None
+
+
+LOCALIZERS = Registry("localizer", "isam2", stages.Localizer)
+MAPPERS = Registry("mapper", "log-odds", stages.Mapper)
+FRONTIER_DETECTORS = Registry("frontier_detector", "ewfd", stages.FrontierDetector)
+CLUSTERERS = Registry("clusterer", "dbscan", stages.Clusterer)
+ALLOCATORS = Registry("allocator", "factor-graph", stages.Allocator)
+GLOBAL_PLANNERS = Registry("global_planner", "astar", stages.GlobalPlanner)
+LOCAL_PLANNERS = Registry("local_planner", "fgp", stages.LocalPlanner)
+
+REGISTRIES: dict[str, Registry] = {
+    r.kind: r
+    for r in (
+        LOCALIZERS,
+        MAPPERS,
+        FRONTIER_DETECTORS,
+        CLUSTERERS,
+        ALLOCATORS,
+        GLOBAL_PLANNERS,
+        LOCAL_PLANNERS,
+    )
+}
+"""Kind -> registry; the kinds are also the stage sections of ``algorithms``."""

@@ -1,0 +1,366 @@
+"""The centralized server: the stages of thesis Fig. 4.2 on a schedule.
+
+Every control period: ingest robot messages -> localizer (SLAM) -> mapper (following pose
+corrections); at the map-update period: costmap -> frontier detector -> clusterer; at the
+replanning period, or when a robot reached or lost its goal: allocator -> global planner;
+then the local planner for the whole team -> velocity commands. Each stage is the plugin
+the scenario names (:mod:`acslam.pipeline.registry`); what the step decided leaves the
+server only as a :class:`~acslam.pipeline.snapshot.Snapshot`.
+
+The server sees only :mod:`acslam.messages` and the map's extent (a deployment parameter,
+like the thesis's fixed 40 m x 40 m grid); it never touches simulator ground truth. The
+costmap and the planners work on the known area's window of the grid
+(:func:`~acslam.mapping.costmap.known_window`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+
+from acslam.config import ScenarioConfig
+from acslam.errors import NoPathError
+from acslam.exploration.clustering import FrontierCluster
+from acslam.grid import GridSpec, Window
+from acslam.mapping.costmap import Costmap, compute_costmap, known_window
+from acslam.messages import (
+    LandmarkObservations,
+    LidarScan,
+    OdometryIncrement,
+    RobotMessage,
+    VelocityCommand,
+)
+from acslam.pipeline.registry import (
+    ALLOCATORS,
+    CLUSTERERS,
+    FRONTIER_DETECTORS,
+    GLOBAL_PLANNERS,
+    LOCAL_PLANNERS,
+    LOCALIZERS,
+    MAPPERS,
+)
+from acslam.pipeline.snapshot import LocalizationView, MapView, Snapshot
+from acslam.planning.astar import lookahead_point, remaining_length_m
+from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.recovery import Recovery
+
+TEAM_FRAME = "map"
+
+
+@dataclass
+class RobotTask:
+    """What the server has decided for one robot."""
+
+    recovery: Recovery
+    cluster: FrontierCluster | None = None
+    path_m: np.ndarray | None = None
+    velocity: tuple[float, float] = (0.0, 0.0)
+    idle_since_s: float | None = None
+
+
+class Server:
+    """Localizes, maps, explores and plans for the whole team from robot messages."""
+
+    def __init__(self, config: ScenarioConfig, starts: np.ndarray, map_spec: GridSpec) -> None:
+        self._config = config
+        algorithms = config.algorithms
+        self._robot_count = len(starts)
+        self._map_spec = map_spec
+        self._localizer = LOCALIZERS.create(
+            algorithms.localizer,
+            scan_matching=algorithms.scan_matching,
+            starts={i: np.asarray(s) for i, s in enumerate(starts)},
+        )
+        self._mapper = MAPPERS.create(algorithms.mapper, spec=map_spec)
+        self._frontier_detector = FRONTIER_DETECTORS.create(
+            algorithms.frontier_detector, spec=map_spec, mapping=algorithms.mapper
+        )
+        self._clusterer = CLUSTERERS.create(algorithms.clusterer)
+        self._allocator = ALLOCATORS.create(algorithms.allocator)
+        self._global_planner = GLOBAL_PLANNERS.create(algorithms.global_planner)
+        self._local_planner = LOCAL_PLANNERS.create(
+            algorithms.local_planner, planning=algorithms.planning, robots=config.robots
+        )
+        self._tasks = [RobotTask(Recovery(algorithms.planning)) for _ in range(self._robot_count)]
+        self._timings_s: dict[str, float] = {}
+        self._new_scan_cells: list[np.ndarray] = []
+        self._corrected = False
+        self._costmap: Costmap | None = None
+        self._window: Window | None = None
+        self._values: np.ndarray | None = None
+        self._frontier_cells = np.zeros((0, 2), dtype=np.int64)
+        self._clusters: list[FrontierCluster] = []
+        self._next_map_update_s = 0.0
+        self._next_replan_s = 0.0
+        self._replan_now = True
+        self._finished = False
+        self._lost: dict[int, float] = {}
+
+    def mark_lost(self, robot_id: int, now_s: float) -> None:
+        """Give up on a robot that stopped answering (e.g. heartbeat timeout).
+
+        Its frontier goes back to the pool at once, its planner state is dropped and it
+        gets no more goals; the others plan around its last estimated pose, where it
+        stands. Its map and trajectory so far stay.
+        """
+        if robot_id in self._lost:
+            return
+        self._lost[robot_id] = now_s
+        task = self._tasks[robot_id]
+        task.cluster, task.path_m, task.velocity = None, None, (0.0, 0.0)
+        self._local_planner.reset(robot_id)
+        self._replan_now = True
+
+    # ------------------------------------------------------------------ schedule
+
+    def step(self, messages: Iterable[RobotMessage], now_s: float) -> Snapshot:
+        """Run one server cycle on the messages received since the last one."""
+        self._timings_s = {}
+        with self._timed("cycle"):
+            commands = self._step(messages, now_s)
+        return self.snapshot(now_s, commands)
+
+    def snapshot(self, now_s: float, commands: Sequence[tuple[float, float]] = ()) -> Snapshot:
+        """The state as of ``now_s``: what :meth:`step` returns, and before the first
+        step the empty start (no map, no commands)."""
+        poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
+        poses.flags.writeable = False
+        return Snapshot(
+            time_s=now_s,
+            commands=tuple(VelocityCommand(i, now_s, v, w) for i, (v, w) in enumerate(commands)),
+            poses=poses,
+            robot_frames=(TEAM_FRAME,) * self._robot_count,
+            map=MapView(self._mapper.version, self._mapper),
+            localization=LocalizationView(self._localizer),
+            costmap=self._costmap,
+            window=self._window,
+            frontier_cells=self._frontier_cells,
+            clusters=tuple(self._clusters),
+            goals_m=tuple(t.cluster.target_m if t.cluster else None for t in self._tasks),
+            paths_m=tuple(t.path_m for t in self._tasks),
+            idle_since_s=tuple(t.idle_since_s for t in self._tasks),
+            stuck_events=tuple(t.recovery.count for t in self._tasks),
+            lost=MappingProxyType(dict(self._lost)),
+            finished=self._finished,
+            timings_s=MappingProxyType(self._timings_s),
+        )
+
+    @contextmanager
+    def _timed(self, stage: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self._timings_s[stage] = time.perf_counter() - start
+
+    def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[tuple[float, float]]:
+        map_update_due = now_s >= self._next_map_update_s
+        with self._timed("slam"):
+            scans = [
+                (index, self._mappable(scan, self._localizer.scan_pose(index)))
+                for index, scan in self._ingest(messages)
+            ]
+            for index, scan in scans:
+                self._localizer.match_scan(index, scan)
+            self._localizer.optimize(close_loops=map_update_due)
+        with self._timed("mapping"):
+            self._integrate(scans)
+        if map_update_due:
+            self._next_map_update_s = now_s + self._config.algorithms.server.map_update_period_s
+            with self._timed("costmap"):
+                self._update_costmap()
+            with self._timed("frontiers"):
+                self._update_frontiers()
+        poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
+        if self._replan_now or now_s >= self._next_replan_s:
+            with self._timed("allocation"):
+                self._allocate(poses, now_s)
+            self._next_replan_s = now_s + self._config.algorithms.planning.replan_period_s
+            self._replan_now = False
+        with self._timed("local_planning"):
+            return self._local_plan(poses, now_s)
+
+    # ------------------------------------------------------------------ SLAM and map
+
+    def _ingest(self, messages: Iterable[RobotMessage]) -> list[tuple[int, LidarScan]]:
+        scans = []
+        for message in messages:
+            if isinstance(message, OdometryIncrement):
+                self._localizer.add_odometry(message)
+            elif isinstance(message, LandmarkObservations):
+                self._localizer.add_landmarks(message)
+            elif isinstance(message, LidarScan):
+                index = self._localizer.add_scan(message)
+                if index is not None:
+                    scans.append((index, message))
+        return scans
+
+    def _mappable(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
+        """The scan minus invalid (0) readings and beams that end on another robot.
+
+        Robots are not walls: their returns would stay in the map after they moved on.
+        """
+        keep = scan.ranges > 0
+        angles = scan.angles + pose[2]
+        ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+        reach = self._config.robots.radius_m + self._config.algorithms.server.robot_filter_margin_m
+        for j in range(self._robot_count):
+            if j != scan.robot_id:
+                with np.errstate(invalid="ignore"):
+                    near = np.linalg.norm(ends - self._localizer.latest_pose(j)[:2], axis=1)
+                    keep &= ~(near < reach)
+        if keep.all():
+            return scan
+        return LidarScan(
+            scan.robot_id, scan.stamp, scan.angles[keep], scan.ranges[keep], scan.range_max_m
+        )
+
+    def _integrate(self, scans: list[tuple[int, LidarScan]]) -> None:
+        """Add new (mappable) scans at their keyframe-relative pose; move scans SLAM
+        corrected."""
+        for index, scan in scans:
+            pose = self._localizer.scan_pose(index)
+            self._mapper.add_scan(scan.robot_id, index, scan.ranges, scan.angles, pose)
+            self._new_scan_cells.append(self._map_spec.world_to_cell(pose[:2])[0])
+        moved = self._localizer.moved_scans()
+        if moved:
+            for index in moved:
+                self._mapper.move_scan(index, self._localizer.scan_pose(index))
+            self._corrected = True
+
+    def _update_costmap(self) -> None:
+        values = self._mapper.occupancy_values()
+        server = self._config.algorithms.server
+        window = known_window(values, self._map_spec, server.window_margin_m)
+        self._values = values
+        self._window = window
+        self._costmap = compute_costmap(
+            window.crop(values),
+            window.spec,
+            self._config.algorithms.costmap,
+            self._config.robots.radius_m,
+        )
+
+    def _update_frontiers(self) -> None:
+        assert self._values is not None and self._window is not None and self._costmap is not None
+        robot_cells = self._map_spec.world_to_cell(
+            np.array([self._localizer.latest_pose(i)[:2] for i in range(self._robot_count)])
+        )
+        scan_cells = None if self._corrected else np.array(self._new_scan_cells).reshape(-1, 2)
+        self._frontier_cells = self._frontier_detector.update(self._values, robot_cells, scan_cells)
+        self._new_scan_cells.clear()
+        self._corrected = False
+        window = self._window
+        self._clusters = self._clusterer.cluster(
+            window.to_local(self._frontier_cells),
+            window.crop(self._values),
+            window.spec,
+            self._costmap,
+        )
+
+    # ------------------------------------------------------------------ decisions
+
+    def _allocate(self, poses: np.ndarray, now_s: float) -> None:
+        """Assign clusters and plan a global path to each; a robot with none goes idle."""
+        costmap, window = self._costmap, self._window
+        if costmap is None or window is None:
+            return
+        robot_cells = window.spec.world_to_cell(poses[:, :2])
+        robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
+        active = [i for i in range(self._robot_count) if i not in self._lost]
+        current = [self._matching_cluster(self._tasks[i]) for i in active]
+        allocation = self._allocator.allocate(robot_cells[active], self._clusters, costmap, current)
+        for k, i in enumerate(active):
+            task = self._tasks[i]
+            choice = allocation.cluster_of_robot[k]
+            path = None
+            if choice is not None:
+                try:
+                    path = self._global_planner.plan(
+                        task.recovery.penalize(costmap.cost, window.spec),
+                        costmap.lethal,
+                        window.spec,
+                        poses[i, :2],
+                        self._clusters[choice].target_m,
+                    )
+                except NoPathError:
+                    path = None
+            if path is None:
+                task.cluster, task.path_m = None, None
+                if task.idle_since_s is None:
+                    task.idle_since_s = now_s
+                continue
+            task.cluster = self._clusters[choice]
+            task.path_m = np.vstack([poses[i, :2], path])
+            task.recovery.replanned(
+                now_s, choice != current[k], remaining_length_m(task.path_m, poses[i, :2])
+            )
+            task.idle_since_s = None
+        # Done once every robot has had nothing to do for a while after the map has begun:
+        # frontiers briefly vanish while a robot stands on the last one it was sent to.
+        idle_since = [self._tasks[i].idle_since_s for i in active]
+        self._finished = (
+            len(self._mapper) > 0
+            and all(s is not None for s in idle_since)
+            and now_s - max(idle_since) >= self._config.algorithms.server.finish_after_idle_s
+        )
+
+    def _matching_cluster(self, task: RobotTask) -> int | None:
+        """The current cluster that continues the robot's goal: its target is nearest the
+        old target, within the goal tolerance plus the clusterer's linkage."""
+        if task.cluster is None or not self._clusters:
+            return None
+        targets = np.array([c.target_m for c in self._clusters])
+        gaps = np.linalg.norm(targets - task.cluster.target_m, axis=1)
+        best = int(np.argmin(gaps))
+        tolerance_m = self._config.algorithms.server.goal_tolerance_m + self._clusterer.linkage_m
+        return best if gaps[best] <= tolerance_m else None
+
+    def _local_plan(self, poses: np.ndarray, now_s: float) -> list[tuple[float, float]]:
+        """(v, omega) for every robot: recovery overrides, else the local planner."""
+        costmap, window = self._costmap, self._window
+        if costmap is None or window is None:
+            return [(0.0, 0.0)] * self._robot_count
+        planning = self._config.algorithms.planning
+        tolerance = self._config.algorithms.server.goal_tolerance_m
+        # The distance field is to cell centres, walls are cell squares: half a cell
+        # diagonal less makes the planners' clearance a lower bound of the truth.
+        res = window.spec.resolution_m
+        field = DistanceField(
+            np.maximum(costmap.distance_m - res / math.sqrt(2.0), 0.0), window.spec
+        )
+        reach_m = planning.horizon_s * self._config.robots.max_v_mps
+        # Every robot takes part, so the others plan around it: a robot without a path
+        # holds its position as its goal (and yields if another one comes close).
+        states, goals, overrides = [], [], {}
+        for i, task in enumerate(self._tasks):
+            state = RobotState(*poses[i], *task.velocity)
+            states.append(state)
+            goals.append(state.xy_m)
+            if task.path_m is None:
+                continue
+            remaining = remaining_length_m(task.path_m, state.xy_m)
+            if remaining < tolerance:
+                self._replan_now = True
+                task.path_m = None
+                continue
+            step = task.recovery.step(now_s, state, remaining)
+            if step.replan:
+                self._replan_now = True
+                self._local_planner.reset(i)
+            if step.command is not None:
+                overrides[i] = step.command
+            goals[i] = lookahead_point(task.path_m, state.xy_m, reach_m)
+        planned = self._local_planner.plan(states, goals, field)
+        commands = [overrides.get(i, (float(v), float(w))) for i, (v, w) in enumerate(planned)]
+        for i in self._lost:
+            commands[i] = (0.0, 0.0)
+        for i, task in enumerate(self._tasks):
+            task.velocity = commands[i]
+        return commands
