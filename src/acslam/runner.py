@@ -21,6 +21,7 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import yaml
@@ -58,6 +59,88 @@ def resolved_config(scenario: Scenario) -> dict:
     return resolved
 
 
+class ServerLink(Protocol):
+    """The robots' side of a run, as the run loop sees it: the simulator in lock step
+    (:class:`InProcessLink`) or robots over a network (``acslam serve``)."""
+
+    @property
+    def time_s(self) -> float:
+        """The run's clock: simulated seconds, or wall seconds since the start."""
+        ...
+
+    def receive(self, server: Server) -> list[RobotMessage]:
+        """The messages that arrived since the last call (robots found silent are marked
+        lost on ``server`` first)."""
+        ...
+
+    def deliver(self, snapshot: Snapshot) -> None:
+        """Send the step's commands (and whatever the robots are told of the server)."""
+        ...
+
+    def advance(self) -> None:
+        """Let the robots run until the next control period."""
+        ...
+
+
+def run_loop(
+    server: Server,
+    link: ServerLink,
+    log: RunLog,
+    max_time_s: float,
+    out_dir: Path,
+    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
+) -> tuple[str, float]:
+    """Step the server once per control period until explored, every robot lost, an
+    error, or ``max_time_s``; returns the reason and the wall seconds it took. Any
+    exception ends the run with its reason (:func:`failure_reason`), so the run's
+    products survive it."""
+    reason = "time limit"
+    started = time.perf_counter()
+    try:
+        while link.time_s < max_time_s - 1e-9:
+            messages = link.receive(server)
+            snapshot = server.step(messages, link.time_s)
+            log.record(snapshot)
+            if len(snapshot.lost) == len(snapshot.poses):
+                reason = "all robots lost"
+                break
+            link.deliver(snapshot)
+            if on_step is not None:
+                on_step(snapshot, messages)
+            if snapshot.finished:
+                reason = "explored"
+                break
+            link.advance()
+            log.sample_explored(link.time_s)
+    except Exception as exc:
+        reason = failure_reason(exc, out_dir)
+    return reason, time.perf_counter() - started
+
+
+class InProcessLink:
+    """The simulator in lock step with the server, through the in-process bus."""
+
+    def __init__(self, sim: Simulator, substeps: int) -> None:
+        self.sim = sim
+        self.substeps = substeps
+        self.bus = InProcessBus()
+
+    @property
+    def time_s(self) -> float:
+        return self.sim.time_s
+
+    def receive(self, server: Server) -> list[RobotMessage]:
+        return self.bus.receive()
+
+    def deliver(self, snapshot: Snapshot) -> None:
+        self.bus.send(snapshot.commands)
+
+    def advance(self) -> None:
+        for _ in range(self.substeps):
+            for message in self.sim.step(self.bus.receive_commands()):
+                self.bus.publish(message)
+
+
 def run_exploration(
     scenario: Scenario,
     out_dir: Path,
@@ -75,28 +158,9 @@ def run_exploration(
     sim = scenario.simulator()
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
-    bus = InProcessBus()
     log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
-    reason = "time limit"
-    started = time.perf_counter()
-    try:
-        while sim.time_s < max_time_s - 1e-9:
-            messages = bus.receive()
-            snapshot = server.step(messages, sim.time_s)
-            log.record(snapshot)
-            bus.send(list(snapshot.commands))
-            if on_step is not None:
-                on_step(snapshot, messages)
-            if snapshot.finished:
-                reason = "explored"
-                break
-            for _ in range(substeps):
-                for message in sim.step(bus.receive_commands()):
-                    bus.publish(message)
-            log.sample_explored(sim.time_s)
-    except Exception as exc:  # the run's products must survive any failure
-        reason = failure_reason(exc, out_dir)
-    wall_time_s = time.perf_counter() - started
+    link = InProcessLink(sim, substeps)
+    reason, wall_time_s = run_loop(server, link, log, max_time_s, out_dir, on_step)
     truth = TruthLog.of_simulator(sim)
     return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, sim.time_s)
 

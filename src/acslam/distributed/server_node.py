@@ -32,10 +32,10 @@ from acslam.pipeline.snapshot import Snapshot
 from acslam.runner import (
     RunLog,
     TruthLog,
-    failure_reason,
     finish_run,
     resolved_config,
     robot_name,
+    run_loop,
 )
 from acslam.scenario import Scenario
 from acslam.transport.codec import StatusBeacon, TruthBatch
@@ -79,34 +79,9 @@ def serve(
         log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
-        reason, now_s, started = "time limit", 0.0, time.monotonic()
-        try:
-            while now_s < max_time_s:
-                _mark_silent_robots_lost(
-                    endpoint, server, log.last, options.heartbeat_timeout_s, now_s
-                )
-                messages = endpoint.receive()
-                snapshot = server.step(messages, now_s)
-                log.record(snapshot)
-                if len(snapshot.lost) == count:
-                    reason = "all robots lost"
-                    break
-                endpoint.send(list(snapshot.commands))
-                endpoint.publish_status(
-                    StatusBeacon(now_s, snapshot.finished, tuple(snapshot.lost))
-                )
-                if on_step is not None:
-                    on_step(snapshot, messages)
-                if snapshot.finished:
-                    reason = "explored"
-                    break
-                log.sample_explored(now_s)
-                elapsed = time.monotonic() - started
-                time.sleep(max(0.0, period_s * math.floor(elapsed / period_s + 1) - elapsed))
-                now_s = time.monotonic() - started
-        except Exception as exc:  # the run's products must survive any failure
-            reason = failure_reason(exc, out_dir)
-        wall_time_s = time.monotonic() - started
+        link = ZenohLink(endpoint, period_s, options.heartbeat_timeout_s)
+        reason, wall_time_s = run_loop(server, link, log, max_time_s, out_dir, on_step)
+        now_s = link.time_s
         lost = log.last.lost
         for _ in range(FINAL_STATUS_REPEATS):
             endpoint.publish_status(StatusBeacon(now_s, True, tuple(lost)))
@@ -139,18 +114,41 @@ def _wait_for_robots(
     return starts, [i for i in range(scenario.robot_count) if i not in heard]
 
 
-def _mark_silent_robots_lost(
-    endpoint: ZenohServerEndpoint,
-    server: Server,
-    last: Snapshot,
-    timeout_s: float,
-    now_s: float,
-) -> None:
-    wall = time.monotonic()
-    for robot, (heard_s, _) in endpoint.heartbeats().items():
-        if robot not in last.lost and wall - heard_s > timeout_s:
-            server.mark_lost(robot, now_s)
-            endpoint.ignore(robot)
+class ZenohLink:
+    """The run loop's link to robots over Zenoh, in wall-clock time since it was made."""
+
+    def __init__(
+        self, endpoint: ZenohServerEndpoint, period_s: float, heartbeat_timeout_s: float
+    ) -> None:
+        self.endpoint = endpoint
+        self.period_s = period_s
+        self.heartbeat_timeout_s = heartbeat_timeout_s
+        self._started = time.monotonic()
+        self._lost: set[int] = set()
+
+    @property
+    def time_s(self) -> float:
+        return time.monotonic() - self._started
+
+    def receive(self, server: Server) -> list[RobotMessage]:
+        """Robots whose heartbeats stopped are marked lost, then the rest's messages."""
+        wall = time.monotonic()
+        for robot, (heard_s, _) in self.endpoint.heartbeats().items():
+            if robot not in self._lost and wall - heard_s > self.heartbeat_timeout_s:
+                self._lost.add(robot)
+                server.mark_lost(robot, self.time_s)
+                self.endpoint.ignore(robot)
+        return self.endpoint.receive()
+
+    def deliver(self, snapshot: Snapshot) -> None:
+        self.endpoint.send(snapshot.commands)
+        status = StatusBeacon(snapshot.time_s, snapshot.finished, tuple(snapshot.lost))
+        self.endpoint.publish_status(status)
+
+    def advance(self) -> None:
+        """Sleep to the next multiple of the control period (a slow step skips one)."""
+        elapsed = self.time_s
+        time.sleep(max(0.0, self.period_s * math.floor(elapsed / self.period_s + 1) - elapsed))
 
 
 def _truth_log(batches: dict[int, list[TruthBatch]], scenario: Scenario) -> TruthLog:
