@@ -301,7 +301,25 @@ def report_command(run_dir: Path) -> None:
 
 @cli.group("slam")
 def slam_group() -> None:
-    """Run the SLAM back end alone on real multi-robot datasets."""
+    """Replay real recordings through the localizer stage and score them."""
+
+
+def algorithms_option(preset: str) -> Callable:
+    """--algorithms FILE: the replay's stages and parameters instead of a built-in preset."""
+    return click.option(
+        "--algorithms",
+        "algorithms_file",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        help=f"An algorithms YAML (the `algorithms` section of a scenario) [default: the "
+        f"built-in {preset} preset, src/acslam/replay/presets/{preset}.yaml].",
+    )
+
+
+def _algorithms(path: Path | None):
+    from acslam.config import load_algorithms
+
+    return None if path is None else load_algorithms(path)
 
 
 @slam_group.command("mrclam")
@@ -331,12 +349,14 @@ def slam_group() -> None:
     show_default=True,
     help="Add a factor between two robots' poses when one sees the other's barcode.",
 )
+@algorithms_option("mrclam")
 def slam_mrclam_command(
     path: Path,
     out_dir: Path,
     known_association: bool,
     max_time_s: float | None,
     inter_robot: bool,
+    algorithms_file: Path | None,
 ) -> None:
     """Localize the 5 robots of a UTIAS MRCLAM dataset in one factor graph and score it.
 
@@ -350,12 +370,13 @@ def slam_mrclam_command(
         out_dir,
         known_association=known_association,
         max_time_s=max_time_s,
+        algorithms=_algorithms(algorithms_file),
         inter_robot=inter_robot,
     )
     overall = metrics["overall"]
     click.echo(
-        f"position RMSE {overall['slam']['position_rmse_m']:.3f} m (dead reckoning "
-        f"{overall['dead_reckoning']['position_rmse_m']:.3f} m), landmark RMSE "
+        f"position RMSE {overall['slam']['rmse_m']:.3f} m (dead reckoning "
+        f"{overall['dead_reckoning']['rmse_m']:.3f} m), landmark RMSE "
         f"{metrics['landmarks']['rmse_m']:.3f} m, association precision "
         f"{metrics['association']['pairwise_precision']:.3f} -> {out_dir / 'metrics.json'}"
     )
@@ -370,7 +391,8 @@ def slam_mrclam_command(
     required=True,
     help="Folder for trajectory.tum, map.yaml/.pgm/.png, odometry_vs_slam.png, metrics.json.",
 )
-def slam_carmen_command(log: Path, out_dir: Path) -> None:
+@algorithms_option("carmen")
+def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) -> None:
     """Replay a CARMEN laser log (ODOM + FLASER, plain, .bz2 or .gz) through SLAM and mapping.
 
     Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
@@ -378,7 +400,7 @@ def slam_carmen_command(log: Path, out_dir: Path) -> None:
     """
     from acslam.replay.carmen import run_carmen
 
-    metrics = run_carmen(log, out_dir)
+    metrics = run_carmen(log, out_dir, _algorithms(algorithms_file))
     skipped = metrics["skipped_lines"]["count"]
     click.echo(
         f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "

@@ -459,6 +459,10 @@ class ScanMatchingConfig(Section):
     # in time than loop_min_separation_s so neighbours in the chain are not re-matched.
     loop_radius_m: PositiveFloat = 2.0
     loop_min_separation_s: NonNegativeFloat = 20.0
+    # Sequential matches go against the merged scans of this many previous keyframes of
+    # the robot (placed by their current estimates): more of the scene per match, so
+    # less drift per step. 1: the previous keyframe's scan alone.
+    submap_keyframes: Annotated[int, Field(ge=1)] = 1
 
 
 def _stage_section(kind: str) -> Any:
@@ -565,14 +569,7 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
     """Validate already-loaded YAML data; relative file paths resolve against ``source``."""
     if not isinstance(data, dict):
         raise ConfigError(source, "", "a scenario must be a YAML mapping of sections")
-    try:
-        config = ScenarioConfig.model_validate(data)
-    except ValidationError as exc:
-        errors = exc.errors()
-        first = errors[0]
-        more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
-        message = first["msg"].removeprefix("Value error, ")
-        raise ConfigError(source, _field_path(first["loc"]), message + more) from None
+    config = _validated(ScenarioConfig, data, source)
     world_file = getattr(config.world, "file", None)
     if world_file is not None and not world_file.is_absolute() and Path(source).is_file():
         resolved = (Path(source).parent / world_file).resolve()
@@ -580,6 +577,41 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
             update={"world": config.world.model_copy(update={"file": resolved})}
         )
     return config
+
+
+def _validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str = "") -> Any:
+    """``model`` from loaded YAML data; the first problem becomes a ConfigError naming
+    ``source`` and the field path (under ``prefix``)."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors()
+        first = errors[0]
+        more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
+        message = first["msg"].removeprefix("Value error, ")
+        field = ".".join(p for p in (prefix, _field_path(first["loc"])) if p)
+        raise ConfigError(source, field, message + more) from None
+
+
+def _parse_yaml(text: str, source: str | Path) -> Any:
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(source, "", f"invalid YAML{where}") from None
+
+
+def load_algorithms(path: str | Path) -> AlgorithmsConfig:
+    """An ``algorithms`` section on its own (a replay preset): stages and their
+    parameters, every field not given at its default."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(path, "", "algorithms file not found")
+    data = _parse_yaml(path.read_text(encoding="utf-8"), path)
+    if not isinstance(data, dict):
+        raise ConfigError(path, "", "an algorithms file must be a YAML mapping of sections")
+    return _validated(AlgorithmsConfig, data, path, "algorithms")
 
 
 def load_scenario_config(name_or_path: str | Path) -> tuple[ScenarioConfig, str]:
@@ -604,10 +636,4 @@ def load_scenario_config(name_or_path: str | Path) -> tuple[ScenarioConfig, str]
         text = (resources.files("acslam") / "scenarios" / f"{name_or_path}.yaml").read_text(
             encoding="utf-8"
         )
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(source, "", f"invalid YAML{where}") from None
-    return parse_scenario(data, source), source
+    return parse_scenario(_parse_yaml(text, source), source), source

@@ -91,13 +91,16 @@ class LandmarkObservations:
     """3D landmark points seen by the camera, in the robot frame (m).
 
     ``points`` has shape (N, 3); ``descriptors`` (N, D) uint8 is optional (ORB features
-    carry them, simulated landmarks do not). N may be 0.
+    carry them, simulated landmarks do not). ``ids`` (N,) are identities the sensor
+    recognised itself (fiducials, barcodes): given, they replace data association. N may
+    be 0.
     """
 
     robot_id: int
     stamp: float
     points: np.ndarray
     descriptors: np.ndarray | None = field(default=None)
+    ids: np.ndarray | None = field(default=None)
 
     def __post_init__(self) -> None:
         _check_header("LandmarkObservations", self.robot_id, self.stamp)
@@ -109,7 +112,35 @@ class LandmarkObservations:
         _check_finite("LandmarkObservations", "points", points)
         if self.descriptors is not None and len(self.descriptors) != len(points):
             raise MessageError("LandmarkObservations.descriptors: one row per point required")
+        if self.ids is not None:
+            ids = np.asarray(self.ids)
+            if ids.shape != (len(points),) or not np.issubdtype(ids.dtype, np.integer):
+                raise MessageError("LandmarkObservations.ids: one integer per point required")
+            object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "points", points)
+
+
+@dataclass(frozen=True)
+class RobotSighting:
+    """Robot ``robot_id`` saw robot ``observed_id`` at ``point`` ``[x, y, z]`` (metres, in
+    the observer's frame). The identity comes from a signal of the seen robot's own (a
+    marker on it, as MRCLAM's barcodes), so no association is needed."""
+
+    robot_id: int
+    stamp: float
+    observed_id: int
+    point: np.ndarray
+
+    def __post_init__(self) -> None:
+        _check_header("RobotSighting", self.robot_id, self.stamp)
+        _check_header("RobotSighting", self.observed_id, self.stamp)
+        if self.observed_id == self.robot_id:
+            raise MessageError("RobotSighting.observed_id: a robot cannot see itself")
+        point = np.asarray(self.point, dtype=float)
+        if point.shape != (3,):
+            raise MessageError("RobotSighting.point: must have shape (3,)")
+        _check_finite("RobotSighting", "point", point)
+        object.__setattr__(self, "point", point)
 
 
 @dataclass(frozen=True)
@@ -127,4 +158,4 @@ class VelocityCommand:
         _check_finite("VelocityCommand", "omega", self.omega)
 
 
-RobotMessage = OdometryIncrement | LidarScan | LandmarkObservations
+RobotMessage = OdometryIncrement | LidarScan | LandmarkObservations | RobotSighting

@@ -21,7 +21,6 @@ from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 import yaml
@@ -40,8 +39,9 @@ from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
+from acslam.sources import DataSource
+from acslam.sources.simulated import SimulatedSource
 from acslam.trajectory import write_tum
-from acslam.transport.inprocess import InProcessBus
 from acslam.worlds.mapio import save_map
 
 EXPLORED_SAMPLE_PERIOD_S = 1.0
@@ -59,32 +59,9 @@ def resolved_config(scenario: Scenario) -> dict:
     return resolved
 
 
-class ServerLink(Protocol):
-    """The robots' side of a run, as the run loop sees it: the simulator in lock step
-    (:class:`InProcessLink`) or robots over a network (``acslam serve``)."""
-
-    @property
-    def time_s(self) -> float:
-        """The run's clock: simulated seconds, or wall seconds since the start."""
-        ...
-
-    def receive(self, server: Server) -> list[RobotMessage]:
-        """The messages that arrived since the last call (robots found silent are marked
-        lost on ``server`` first)."""
-        ...
-
-    def deliver(self, snapshot: Snapshot) -> None:
-        """Send the step's commands (and whatever the robots are told of the server)."""
-        ...
-
-    def advance(self) -> None:
-        """Let the robots run until the next control period."""
-        ...
-
-
 def run_loop(
     server: Server,
-    link: ServerLink,
+    source: DataSource,
     log: RunLog,
     max_time_s: float,
     out_dir: Path,
@@ -97,48 +74,26 @@ def run_loop(
     reason = "time limit"
     started = time.perf_counter()
     try:
-        while link.time_s < max_time_s - 1e-9:
-            messages = link.receive(server)
-            snapshot = server.step(messages, link.time_s)
+        while not source.finished and source.time_s < max_time_s - 1e-9:
+            for robot in source.newly_lost():
+                server.mark_lost(robot, source.time_s)
+            messages = source.receive()
+            snapshot = server.step(messages, source.time_s)
             log.record(snapshot)
             if len(snapshot.lost) == len(snapshot.poses):
                 reason = "all robots lost"
                 break
-            link.deliver(snapshot)
+            source.deliver(snapshot)
             if on_step is not None:
                 on_step(snapshot, messages)
             if snapshot.finished:
                 reason = "explored"
                 break
-            link.advance()
-            log.sample_explored(link.time_s)
+            source.advance()
+            log.sample_explored(source.time_s)
     except Exception as exc:
         reason = failure_reason(exc, out_dir)
     return reason, time.perf_counter() - started
-
-
-class InProcessLink:
-    """The simulator in lock step with the server, through the in-process bus."""
-
-    def __init__(self, sim: Simulator, substeps: int) -> None:
-        self.sim = sim
-        self.substeps = substeps
-        self.bus = InProcessBus()
-
-    @property
-    def time_s(self) -> float:
-        return self.sim.time_s
-
-    def receive(self, server: Server) -> list[RobotMessage]:
-        return self.bus.receive()
-
-    def deliver(self, snapshot: Snapshot) -> None:
-        self.bus.send(snapshot.commands)
-
-    def advance(self) -> None:
-        for _ in range(self.substeps):
-            for message in self.sim.step(self.bus.receive_commands()):
-                self.bus.publish(message)
 
 
 def run_exploration(
@@ -159,8 +114,8 @@ def run_exploration(
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
     log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
-    link = InProcessLink(sim, substeps)
-    reason, wall_time_s = run_loop(server, link, log, max_time_s, out_dir, on_step)
+    source = SimulatedSource(sim, substeps)
+    reason, wall_time_s = run_loop(server, source, log, max_time_s, out_dir, on_step)
     truth = TruthLog.of_simulator(sim)
     return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, sim.time_s)
 

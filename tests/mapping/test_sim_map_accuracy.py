@@ -152,12 +152,12 @@ def map_run(name: str, max_time_s: float) -> tuple[dict[str, float], int]:
         slam.update(extra_iterations=2 if closures else 0)
         estimates = np.array([slam.latest_pose(i) for i in range(len(starts))])
         for index, scan in scans:
-            pose = slam.scan_pose(index)
+            pose = slam.scans.pose(index)
             others = np.delete(estimates, scan.robot_id, axis=0)
             angles, ranges = _mappable(scan, pose, others, reach_m)
             team.add_scan(scan.robot_id, index, ranges, angles, pose)
-        for index in slam.scans_of_keyframes(slam.moved_keyframes()):
-            team.move_scan(index, slam.scan_pose(index))
+        for index in slam.scans.of_keyframes(slam.moved_keyframes()):
+            team.move_scan(index, slam.scans.pose(index))
     assert all(k == len(r) for k, r in zip(next_target, routes, strict=True)), (
         f"routes unfinished at {sim.time_s:.0f} s: waypoint {next_target} of "
         f"{[len(r) for r in routes]}, robots at {sim.ground_truth.poses().round(2).tolist()}, "

@@ -92,9 +92,9 @@ def test_slam_beats_dead_reckoning_on_the_first_120_s(
     mostly short drives, so odometry has not drifted far yet and a 5x factor is not
     reachable on the prefix."""
     metrics = run_mrclam(shared_dataset(DATASET), tmp_path, known_association=True, max_time_s=120)
-    assert metrics["overall"]["slam"]["position_rmse_m"] <= 0.2
+    assert metrics["overall"]["slam"]["rmse_m"] <= 0.2
     for robot in metrics["robots"].values():
-        assert robot["slam"]["position_rmse_m"] < robot["dead_reckoning"]["position_rmse_m"]
+        assert robot["slam"]["rmse_m"] < robot["dead_reckoning"]["rmse_m"]
     assert metrics["landmarks"]["rmse_m"] <= 0.3
     assert json.loads((tmp_path / "metrics.json").read_text())["known_association"] is True
     sightings = metrics["robot_measurements"]
@@ -139,7 +139,7 @@ def test_time_going_backwards_is_skipped_and_counted(tmp_path: Path) -> None:
     assert metrics["skipped"]["time_not_advancing"] == 2
     assert set(metrics["robots"]) == {"1", "2", "3", "4", "5"}
     for robot in metrics["robots"].values():
-        assert robot["slam"]["position_rmse_m"] < 0.05
+        assert robot["slam"]["rmse_m"] < 0.05
     association = metrics["association"]
     seen = association["points_associated"] + association["points_tentative"]
     assert seen + association["points_dropped_ambiguous"] == 5 * 20

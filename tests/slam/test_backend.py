@@ -175,7 +175,7 @@ def test_seeing_another_robot_corrects_its_drift() -> None:
     assert before[0] - truth1[0] == pytest.approx(-0.3, abs=1e-9)
     assert backend.keyframe_count(1) == 8  # a keyframe every 4 steps: 0.18 m past the last
     assert backend.add_robot_observation(0, 1, 3.05, np.array([*truth1[:2], 0.0]))
-    assert backend.robot_observations == 1
+    assert backend.association.robot_observations == 1
     backend.update(extra_iterations=4)  # Huber reweighting needs a few Gauss-Newton steps
     after = backend.latest_pose(1)
     assert np.hypot(*(after - truth1)[:2]) < 0.05
@@ -217,7 +217,7 @@ def test_posed_scans_follow_their_keyframe() -> None:
     backend.add_odometry(OdometryIncrement(0, 0.1, 0.0, 0.1, 0.0, 0.0))
     backend.add_scan(scan)
     backend.update()
-    ((stored, pose),) = backend.posed_scans()
+    ((stored, pose),) = backend.scans.posed()
     assert stored is scan
     np.testing.assert_allclose(pose, [0.1, 0.0, 0.0], atol=1e-9)
 
@@ -286,16 +286,16 @@ def test_scan_constraint_overrides_biased_odometry() -> None:
     backend.add_odometry(OdometryIncrement(0, 1.0, 0.0, 1.0, 0.0, 0.0))
     backend.add_odometry(OdometryIncrement(0, 1.1, 1.0, 0.05, 0.0, 0.0))
     second = backend.add_scan(LidarScan(0, 1.1, np.zeros(1), np.zeros(1), 8.0))
-    assert backend.scan_keyframe(first) == (0, 0)
-    assert backend.scan_keyframe(second) == (0, 1)
-    backend.add_scan_constraint(
+    assert backend.scans.keyframe(first) == (0, 0)
+    assert backend.scans.keyframe(second) == (0, 1)
+    backend.scans.add_constraint(
         first, second, np.array([1.15, 0.0, 0.0]), np.diag([1e-6, 1e-6, 1e-6]), robust=False
     )
     backend.update(extra_iterations=2)
     _, poses = backend.trajectory(0)
     # kf_1 = scan_0 * 1.15 m * (0.05 m offset)^-1 = 1.10 m; odometry (1.0 m) is much looser.
     assert poses[1, 0] == pytest.approx(1.1, abs=2e-3)
-    assert backend.scan_pose(second)[0] == pytest.approx(1.15, abs=2e-3)
+    assert backend.scans.pose(second)[0] == pytest.approx(1.15, abs=2e-3)
 
 
 def test_isam2_speed_measurement_is_consistent() -> None:

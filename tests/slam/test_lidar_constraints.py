@@ -25,13 +25,13 @@ def _drive(baseline_m: float) -> list[tuple[int, int]]:
     slam = SlamBackend(SlamConfig(keyframe_distance_m=0.3), {0: np.array([1.0, 1.5, 0.0])})
     lidar = LidarConstraints(ScanMatchingConfig(sequential_baseline_m=baseline_m))
     pairs = []
-    add = slam.add_scan_constraint
+    add = slam.scans.add_constraint
 
     def record(index_a, index_b, *args) -> None:
-        pairs.append((slam.scan_keyframe(index_a)[1], slam.scan_keyframe(index_b)[1]))
+        pairs.append((slam.scans.keyframe(index_a)[1], slam.scans.keyframe(index_b)[1]))
         add(index_a, index_b, *args)
 
-    slam.add_scan_constraint = record
+    slam.scans.add_constraint = record
     for k in range(31):
         if k:
             slam.add_odometry(OdometryIncrement(0, k * 0.5, (k - 1) * 0.5, STEP_M, 0.0, 0.0))

@@ -17,7 +17,6 @@ hear the server, so the two agree to a few milliseconds.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,6 +37,7 @@ from acslam.runner import (
     run_loop,
 )
 from acslam.scenario import Scenario
+from acslam.sources.zenoh import ZenohSource
 from acslam.transport.codec import StatusBeacon, TruthBatch
 from acslam.transport.zenoh_link import ZenohServerEndpoint, open_session
 
@@ -79,9 +79,9 @@ def serve(
         log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
-        link = ZenohLink(endpoint, period_s, options.heartbeat_timeout_s)
-        reason, wall_time_s = run_loop(server, link, log, max_time_s, out_dir, on_step)
-        now_s = link.time_s
+        source = ZenohSource(endpoint, period_s, options.heartbeat_timeout_s)
+        reason, wall_time_s = run_loop(server, source, log, max_time_s, out_dir, on_step)
+        now_s = source.time_s
         lost = log.last.lost
         for _ in range(FINAL_STATUS_REPEATS):
             endpoint.publish_status(StatusBeacon(now_s, True, tuple(lost)))
@@ -112,43 +112,6 @@ def _wait_for_robots(
     for robot, (_, beat) in heard.items():
         starts[robot] = beat.pose
     return starts, [i for i in range(scenario.robot_count) if i not in heard]
-
-
-class ZenohLink:
-    """The run loop's link to robots over Zenoh, in wall-clock time since it was made."""
-
-    def __init__(
-        self, endpoint: ZenohServerEndpoint, period_s: float, heartbeat_timeout_s: float
-    ) -> None:
-        self.endpoint = endpoint
-        self.period_s = period_s
-        self.heartbeat_timeout_s = heartbeat_timeout_s
-        self._started = time.monotonic()
-        self._lost: set[int] = set()
-
-    @property
-    def time_s(self) -> float:
-        return time.monotonic() - self._started
-
-    def receive(self, server: Server) -> list[RobotMessage]:
-        """Robots whose heartbeats stopped are marked lost, then the rest's messages."""
-        wall = time.monotonic()
-        for robot, (heard_s, _) in self.endpoint.heartbeats().items():
-            if robot not in self._lost and wall - heard_s > self.heartbeat_timeout_s:
-                self._lost.add(robot)
-                server.mark_lost(robot, self.time_s)
-                self.endpoint.ignore(robot)
-        return self.endpoint.receive()
-
-    def deliver(self, snapshot: Snapshot) -> None:
-        self.endpoint.send(snapshot.commands)
-        status = StatusBeacon(snapshot.time_s, snapshot.finished, tuple(snapshot.lost))
-        self.endpoint.publish_status(status)
-
-    def advance(self) -> None:
-        """Sleep to the next multiple of the control period (a slow step skips one)."""
-        elapsed = self.time_s
-        time.sleep(max(0.0, self.period_s * math.floor(elapsed / self.period_s + 1) - elapsed))
 
 
 def _truth_log(batches: dict[int, list[TruthBatch]], scenario: Scenario) -> TruthLog:

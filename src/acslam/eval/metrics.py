@@ -6,7 +6,8 @@ from the saved results later.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Mapping, Sequence
 from itertools import combinations
 
 import numpy as np
@@ -15,33 +16,48 @@ from acslam.geometry import wrap_angles
 from acslam.grid import OCCUPIED, UNKNOWN
 
 
-def _interpolate_poses(
-    stamps: np.ndarray, ref_stamps: np.ndarray, ref_poses: np.ndarray
+def interpolate_poses(
+    stamps: np.ndarray,
+    ref_stamps: np.ndarray,
+    ref_poses: np.ndarray,
+    max_gap_s: float = math.inf,
 ) -> np.ndarray:
-    """Reference poses linearly interpolated at ``stamps`` (heading through its unwrap)."""
+    """Reference poses linearly interpolated at ``stamps`` (heading through its unwrap);
+    NaN outside the reference's span or between two samples more than ``max_gap_s``
+    apart (a dropout of the reference)."""
     x = np.interp(stamps, ref_stamps, ref_poses[:, 0])
     y = np.interp(stamps, ref_stamps, ref_poses[:, 1])
     theta = wrap_angles(np.interp(stamps, ref_stamps, np.unwrap(ref_poses[:, 2])))
-    return np.column_stack([x, y, theta])
+    poses = np.column_stack([x, y, theta])
+    right = np.searchsorted(ref_stamps, stamps).clip(1, max(len(ref_stamps) - 1, 1))
+    bad = (stamps < ref_stamps[0]) | (stamps > ref_stamps[-1])
+    if len(ref_stamps) > 1:
+        bad |= (ref_stamps[right] - ref_stamps[right - 1]) > max_gap_s
+    poses[bad] = np.nan
+    return poses
 
 
-def localization_errors(
-    stamps: np.ndarray, poses: np.ndarray, true_stamps: np.ndarray, true_poses: np.ndarray
-) -> dict[str, float]:
-    """Position and heading errors of a trajectory against ground truth (Table 5.2).
-
-    The truth is interpolated at the estimate's stamps; stamps outside the truth's span
-    are dropped. Position error is the Euclidean distance, heading error the wrapped
-    absolute difference. ``std`` is the standard deviation of the error magnitudes.
-    """
+def _error_magnitudes(
+    stamps: np.ndarray,
+    poses: np.ndarray,
+    true_stamps: np.ndarray,
+    true_poses: np.ndarray,
+    max_gap_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position and heading error at each stamp the truth covers."""
     stamps = np.asarray(stamps, dtype=float)
-    inside = (stamps >= true_stamps[0]) & (stamps <= true_stamps[-1])
-    if not inside.any():
-        raise ValueError("the estimated trajectory does not overlap the ground truth in time")
-    truth = _interpolate_poses(stamps[inside], true_stamps, true_poses)
-    estimate = np.asarray(poses, dtype=float)[inside]
+    truth = interpolate_poses(stamps, true_stamps, true_poses, max_gap_s)
+    covered = ~np.isnan(truth).any(axis=1)
+    estimate = np.asarray(poses, dtype=float)[covered]
+    truth = truth[covered]
     distance = np.hypot(*(estimate[:, :2] - truth[:, :2]).T)
     yaw = np.abs(wrap_angles(estimate[:, 2] - truth[:, 2]))
+    return distance, yaw
+
+
+def _summary(distance: np.ndarray, yaw: np.ndarray) -> dict[str, float]:
+    if not len(distance):
+        raise ValueError("the estimated trajectory does not overlap the ground truth in time")
     return {
         "final_dist_m": float(distance[-1]),
         "mae_m": float(distance.mean()),
@@ -52,6 +68,34 @@ def localization_errors(
         "rmse_yaw_rad": float(np.sqrt(np.mean(yaw**2))),
         "std_yaw_rad": float(yaw.std()),
     }
+
+
+def localization_errors(
+    stamps: np.ndarray,
+    poses: np.ndarray,
+    true_stamps: np.ndarray,
+    true_poses: np.ndarray,
+    max_gap_s: float = math.inf,
+) -> dict[str, float]:
+    """Position and heading errors of a trajectory against ground truth (Table 5.2).
+
+    The truth is interpolated at the estimate's stamps; stamps outside the truth's span,
+    or in a gap of it longer than ``max_gap_s``, are dropped. Position error is the
+    Euclidean distance, heading error the wrapped absolute difference. ``std`` is the
+    standard deviation of the error magnitudes.
+    """
+    return _summary(*_error_magnitudes(stamps, poses, true_stamps, true_poses, max_gap_s))
+
+
+def pooled_localization_errors(
+    trajectories: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    max_gap_s: float = math.inf,
+) -> dict[str, float]:
+    """:func:`localization_errors` over the samples of several robots' trajectories
+    together, each ``(stamps, poses, true_stamps, true_poses)``; ``final_*`` is the last
+    robot's."""
+    parts = [_error_magnitudes(*trajectory, max_gap_s) for trajectory in trajectories]
+    return _summary(np.concatenate([d for d, _ in parts]), np.concatenate([y for _, y in parts]))
 
 
 def confusion_rates(true_occupied: np.ndarray, estimated_values: np.ndarray) -> dict[str, float]:

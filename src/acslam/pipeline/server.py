@@ -29,13 +29,8 @@ from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.grid import GridSpec, Window
 from acslam.mapping.costmap import Costmap, compute_costmap, known_window
-from acslam.messages import (
-    LandmarkObservations,
-    LidarScan,
-    OdometryIncrement,
-    RobotMessage,
-    VelocityCommand,
-)
+from acslam.messages import RobotMessage, VelocityCommand
+from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import (
     ALLOCATORS,
     CLUSTERERS,
@@ -77,6 +72,8 @@ class Server:
             scan_matching=algorithms.scan_matching,
             starts={i: np.asarray(s) for i, s in enumerate(starts)},
         )
+        reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
+        self._perception = Perception(self._localizer, range(self._robot_count), reach_m)
         self._mapper = MAPPERS.create(algorithms.mapper, spec=map_spec)
         self._frontier_detector = FRONTIER_DETECTORS.create(
             algorithms.frontier_detector, spec=map_spec, mapping=algorithms.mapper
@@ -162,13 +159,7 @@ class Server:
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[tuple[float, float]]:
         map_update_due = now_s >= self._next_map_update_s
         with self._timed("slam"):
-            scans = [
-                (index, self._mappable(scan, self._localizer.scan_pose(index)))
-                for index, scan in self._ingest(messages)
-            ]
-            for index, scan in scans:
-                self._localizer.match_scan(index, scan)
-            self._localizer.optimize(close_loops=map_update_due)
+            scans = self._perception.localize(messages, close_loops=map_update_due).scans
         with self._timed("mapping"):
             self._integrate(scans)
         if map_update_due:
@@ -186,47 +177,15 @@ class Server:
         with self._timed("local_planning"):
             return self._local_plan(poses, now_s)
 
-    # ------------------------------------------------------------------ SLAM and map
+    # ------------------------------------------------------------------ map
 
-    def _ingest(self, messages: Iterable[RobotMessage]) -> list[tuple[int, LidarScan]]:
-        scans = []
-        for message in messages:
-            if isinstance(message, OdometryIncrement):
-                self._localizer.add_odometry(message)
-            elif isinstance(message, LandmarkObservations):
-                self._localizer.add_landmarks(message)
-            elif isinstance(message, LidarScan):
-                index = self._localizer.add_scan(message)
-                if index is not None:
-                    scans.append((index, message))
-        return scans
-
-    def _mappable(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
-        """The scan minus invalid (0) readings and beams that end on another robot.
-
-        Robots are not walls: their returns would stay in the map after they moved on.
-        """
-        keep = scan.ranges > 0
-        angles = scan.angles + pose[2]
-        ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
-        reach = self._config.robots.radius_m + self._config.algorithms.server.robot_filter_margin_m
-        for j in range(self._robot_count):
-            if j != scan.robot_id:
-                with np.errstate(invalid="ignore"):
-                    near = np.linalg.norm(ends - self._localizer.latest_pose(j)[:2], axis=1)
-                    keep &= ~(near < reach)
-        if keep.all():
-            return scan
-        return LidarScan(
-            scan.robot_id, scan.stamp, scan.angles[keep], scan.ranges[keep], scan.range_max_m
-        )
-
-    def _integrate(self, scans: list[tuple[int, LidarScan]]) -> None:
+    def _integrate(self, scans: list[KeptScan]) -> None:
         """Add new (mappable) scans at their keyframe-relative pose; move scans SLAM
         corrected."""
-        for index, scan in scans:
-            pose = self._localizer.scan_pose(index)
-            self._mapper.add_scan(scan.robot_id, index, scan.ranges, scan.angles, pose)
+        for kept in scans:
+            pose = self._localizer.scan_pose(kept.index)
+            scan = kept.mappable
+            self._mapper.add_scan(scan.robot_id, kept.index, scan.ranges, scan.angles, pose)
             self._new_scan_cells.append(self._map_spec.world_to_cell(pose[:2])[0])
         moved = self._localizer.moved_scans()
         if moved:

@@ -12,6 +12,7 @@ belong to; no stage may assume that all robots share one frame. Grid cells are
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 if TYPE_CHECKING:
@@ -21,8 +22,28 @@ if TYPE_CHECKING:
     from acslam.exploration.clustering import FrontierCluster
     from acslam.grid import GridSpec
     from acslam.mapping.costmap import Costmap
-    from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
+    from acslam.messages import (
+        LandmarkObservations,
+        LidarScan,
+        OdometryIncrement,
+        RobotSighting,
+    )
     from acslam.planning.field import DistanceField, RobotState
+
+
+@dataclass(frozen=True)
+class AssociationResult:
+    """What one observed point became: its most probable landmark and all probabilities.
+
+    ``landmark`` is -1 (and ``probabilities`` empty) for a point that made no factor: an
+    ambiguous point that was dropped, or (``tentative`` True) an observation of a
+    tentative landmark not confirmed yet (its factor is added if it gets confirmed).
+    """
+
+    landmark: int
+    is_new: bool
+    probabilities: dict[int, float]
+    tentative: bool = False
 
 
 @runtime_checkable
@@ -36,7 +57,11 @@ class Localizer(Protocol):
 
     def add_odometry(self, message: OdometryIncrement) -> None: ...
 
-    def add_landmarks(self, message: LandmarkObservations) -> None: ...
+    def add_landmarks(self, message: LandmarkObservations) -> list[AssociationResult]:
+        """What each point became: a landmark, a tentative one, or nothing (dropped)."""
+        ...
+
+    def add_sighting(self, message: RobotSighting) -> None: ...
 
     def add_scan(self, message: LidarScan) -> int | None:
         """Index of the scan, or None if it is not kept (no pose for its stamp yet)."""
@@ -58,12 +83,20 @@ class Localizer(Protocol):
         """Scans whose pose changed since they were last reported, in index order."""
         ...
 
+    def finish(self) -> None:
+        """The data has ended (a replay): a last loop search and a settled estimate."""
+        ...
+
     def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
         """Stamps (N,) and poses (N, 3) of the robot's estimated trajectory."""
         ...
 
     def landmarks(self) -> np.ndarray:
-        """(M, 2) estimated landmark positions."""
+        """(M, 3) estimated landmark positions."""
+        ...
+
+    def diagnostics(self) -> dict:
+        """Counters worth reporting (JSON-able): matches, rejections, skipped messages."""
         ...
 
 

@@ -1,2 +1,73 @@
-"""Replays of real recordings: CARMEN laser logs and the UTIAS MRCLAM multi-robot data,
-run through the SLAM and mapping stages and scored against what the recording provides."""
+"""Replays of real recordings (CARMEN laser logs, the UTIAS MRCLAM team) through the same
+localizer stage as ``acslam run``, scored against what the recording provides.
+
+:func:`localize` is the loop every replay shares: the recording plays as a
+:class:`~acslam.sources.recorded.RecordedSource`, one server control period at a time,
+into :class:`~acslam.pipeline.perception.Perception`, with the loop-closure search at the
+server's map-update period. Presets of tuned algorithms for a kind of recording are YAML
+files in ``presets/``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from acslam.config import AlgorithmsConfig, RobotsConfig, load_algorithms
+from acslam.messages import LandmarkObservations, RobotMessage
+from acslam.pipeline.perception import KeptScan, Perception
+from acslam.pipeline.registry import LOCALIZERS
+from acslam.pipeline.stages import AssociationResult, Localizer
+from acslam.sources.recorded import RecordedSource
+
+
+def preset(name: str) -> AlgorithmsConfig:
+    """A built-in algorithms preset by name (``presets/<name>.yaml``)."""
+    with resources.as_file(resources.files("acslam") / "replay" / "presets") as folder:
+        return load_algorithms(Path(folder) / f"{name}.yaml")
+
+
+@dataclass(frozen=True)
+class Replayed:
+    """A replay's result: the localizer after the whole recording, every scan it kept and
+    every landmark frame with what its points became, in the order they were played."""
+
+    localizer: Localizer
+    scans: list[KeptScan]
+    landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]]
+
+
+def localize(
+    messages: Sequence[RobotMessage],
+    algorithms: AlgorithmsConfig,
+    starts: dict[int, np.ndarray],
+) -> Replayed:
+    """Play ``messages`` through the localizer stage ``algorithms`` names.
+
+    The robot filter uses the default robot size (a recording does not say it); it only
+    matters when a scan sees another robot of the team.
+    """
+    localizer = LOCALIZERS.create(
+        algorithms.localizer, scan_matching=algorithms.scan_matching, starts=starts
+    )
+    reach_m = RobotsConfig().radius_m + algorithms.server.robot_filter_margin_m
+    perception = Perception(localizer, starts, reach_m)
+    source = RecordedSource(messages, algorithms.planning.control_period_s)
+    scans: list[KeptScan] = []
+    landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]] = []
+    next_search_s = -math.inf
+    while not source.finished:
+        search = source.time_s >= next_search_s
+        if search:
+            next_search_s = source.time_s + algorithms.server.map_update_period_s
+        localized = perception.localize(source.receive(), close_loops=search)
+        scans += localized.scans
+        landmarks += localized.landmarks
+        source.advance()
+    localizer.finish()
+    return Replayed(localizer, scans, landmarks)

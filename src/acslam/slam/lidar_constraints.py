@@ -55,14 +55,9 @@ class _KeyframeScan:
 class LidarConstraints:
     """Adds verified scan-matching factors to a :class:`SlamBackend`."""
 
-    def __init__(self, config: ScanMatchingConfig, submap_keyframes: int = 1) -> None:
-        """``submap_keyframes`` > 1 matches each keyframe to the merged scans of that many
-        previous keyframes of its robot (placed by their current estimates) instead of
-        the last one alone: more of the scene per match, so less drift per step."""
-        if submap_keyframes < 1:
-            raise ValueError("submap_keyframes must be >= 1")
+    def __init__(self, config: ScanMatchingConfig) -> None:
         self.config = config
-        self.submap_keyframes = submap_keyframes
+        self.submap_keyframes = config.submap_keyframes
         self._entries: list[_KeyframeScan] = []
         self._by_keyframe: dict[tuple[int, int], int] = {}
         self._tried: set[tuple[int, int]] = set()
@@ -75,7 +70,7 @@ class LidarConstraints:
     def add_scan(self, slam: SlamBackend, scan_index: int, scan: LidarScan) -> None:
         """Keep the first scan of each keyframe; match it to the previous keyframe's and
         to the baseline keyframe's."""
-        robot_id, keyframe = slam.scan_keyframe(scan_index)
+        robot_id, keyframe = slam.scans.keyframe(scan_index)
         if (robot_id, keyframe) in self._by_keyframe:
             return
         prepared = prepare_scan(scan.angles, scan.ranges, self.config)
@@ -83,7 +78,7 @@ class LidarConstraints:
         path_m = 0.0
         if previous is not None:
             before = self._entries[previous]
-            step = between(slam.scan_pose(before.scan_index), slam.scan_pose(scan_index))
+            step = between(slam.scans.pose(before.scan_index), slam.scans.pose(scan_index))
             path_m = before.path_m + float(np.hypot(step[0], step[1]))
         self._by_keyframe[(robot_id, keyframe)] = len(self._entries)
         self._entries.append(_KeyframeScan(scan_index, robot_id, scan.stamp, prepared, path_m))
@@ -124,7 +119,7 @@ class LidarConstraints:
         the few closures each keyframe needs.
         """
         keyframes = [
-            Keyframe(k, e.robot_id, e.stamp_s, slam.scan_pose(e.scan_index), e.scan)
+            Keyframe(k, e.robot_id, e.stamp_s, slam.scans.pose(e.scan_index), e.scan)
             for k, e in enumerate(self._entries)
         ]
         pairs = [p for p in loop_closure_candidates(keyframes, self.config) if p not in self._tried]
@@ -148,14 +143,14 @@ class LidarConstraints:
         base = self._entries[self._by_keyframe[(robot_id, last)]]
         if self.submap_keyframes == 1:
             return base.scan
-        base_pose = slam.scan_pose(base.scan_index)
+        base_pose = slam.scans.pose(base.scan_index)
         clouds = []
         for keyframe in range(last, max(last - self.submap_keyframes, -1), -1):
             entry = self._by_keyframe.get((robot_id, keyframe))
             if entry is None:
                 continue
             scan = self._entries[entry]
-            relative = between(base_pose, slam.scan_pose(scan.scan_index))
+            relative = between(base_pose, slam.scans.pose(scan.scan_index))
             clouds.append(transform_points(relative, scan.scan.points_m))
         points = np.vstack(clouds)
         return prepare_scan(
@@ -174,7 +169,7 @@ class LidarConstraints:
     ) -> bool:
         """Match b to a (or to ``reference``, a submap in a's frame) and add the factor if
         the match is verified."""
-        guess = between(slam.scan_pose(a.scan_index), slam.scan_pose(b.scan_index))
+        guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
         reference = a.scan if reference is None else reference
         result = match_scans(reference, b.scan, guess, self.config)
         limit_m = None
@@ -183,7 +178,7 @@ class LidarConstraints:
             limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
         if not verify(result, guess, self.config, strict=robust, max_correction_m=limit_m):
             return False
-        slam.add_scan_constraint(
+        slam.scans.add_constraint(
             a.scan_index, b.scan_index, result.relative, result.covariance, robust
         )
         return True

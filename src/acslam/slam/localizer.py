@@ -10,14 +10,16 @@ from __future__ import annotations
 import numpy as np
 
 from acslam.config import ScanMatchingConfig, SlamConfig
-from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
+from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, RobotSighting
 from acslam.pipeline.registry import LOCALIZERS
+from acslam.pipeline.stages import AssociationResult
 from acslam.slam.backend import SlamBackend
 from acslam.slam.lidar_constraints import LidarConstraints
 
 # A loop closure is a large correction: Huber reweighting converges over a few more
-# Gauss-Newton steps.
+# Gauss-Newton steps; at the end of the data, a few more settle the whole estimate.
 EXTRA_ITERATIONS_AFTER_CLOSURE = 2
+EXTRA_ITERATIONS_AT_FINISH = 5
 
 
 @LOCALIZERS.register("isam2", SlamConfig)
@@ -37,8 +39,13 @@ class Isam2Localizer:
     def add_odometry(self, message: OdometryIncrement) -> None:
         self.backend.add_odometry(message)
 
-    def add_landmarks(self, message: LandmarkObservations) -> None:
-        self.backend.add_landmarks(message)
+    def add_landmarks(self, message: LandmarkObservations) -> list[AssociationResult]:
+        return self.backend.add_landmarks(message)
+
+    def add_sighting(self, message: RobotSighting) -> None:
+        self.backend.add_robot_observation(
+            message.robot_id, message.observed_id, message.stamp, message.point
+        )
 
     def add_scan(self, message: LidarScan) -> int | None:
         return self.backend.add_scan(message)
@@ -50,17 +57,46 @@ class Isam2Localizer:
         closures = self.scan_matcher.close_loops(self.backend) if close_loops else 0
         self.backend.update(extra_iterations=EXTRA_ITERATIONS_AFTER_CLOSURE if closures else 0)
 
+    def finish(self) -> None:
+        self.scan_matcher.close_loops(self.backend)
+        self.backend.update(extra_iterations=EXTRA_ITERATIONS_AT_FINISH)
+
     def latest_pose(self, robot_id: int) -> np.ndarray:
         return self.backend.latest_pose(robot_id)
 
     def scan_pose(self, index: int) -> np.ndarray:
-        return self.backend.scan_pose(index)
+        return self.backend.scans.pose(index)
 
     def moved_scans(self) -> list[int]:
-        return self.backend.scans_of_keyframes(self.backend.moved_keyframes())
+        return self.backend.scans.of_keyframes(self.backend.moved_keyframes())
 
     def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
         return self.backend.trajectory(robot_id)
 
     def landmarks(self) -> np.ndarray:
         return self.backend.landmarks()
+
+    def diagnostics(self) -> dict:
+        backend, matcher = self.backend, self.scan_matcher
+        updates_ms = 1e3 * np.array(backend.update_durations_s)
+        return {
+            "keyframes": {str(r): backend.keyframe_count(r) for r in backend.robot_ids},
+            "scan_matching": {
+                "sequential_accepted": matcher.sequential_added,
+                "sequential_rejected": matcher.sequential_rejected,
+            },
+            "loop_closures": {"accepted": matcher.loops_added, "rejected": matcher.loops_rejected},
+            "landmark_association": {
+                "dropped_ambiguous": backend.association.dropped_ambiguous,
+                "tentative_observations": backend.association.tentative_observations,
+                "tentatives_expired": backend.association.expired_tentatives,
+            },
+            "robot_sightings": backend.association.robot_observations,
+            "skipped_messages": dict(backend.skipped_messages),
+            "isam2_update_ms": {
+                "count": len(updates_ms),
+                "mean": float(updates_ms.mean()) if len(updates_ms) else None,
+                "p95": float(np.percentile(updates_ms, 95)) if len(updates_ms) else None,
+                "max": float(updates_ms.max()) if len(updates_ms) else None,
+            },
+        }

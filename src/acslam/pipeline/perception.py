@@ -1,0 +1,89 @@
+"""Robot messages into the localizer, and scans made fit for the map: the half of the
+server that replays of recorded data run too."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from acslam.messages import (
+    LandmarkObservations,
+    LidarScan,
+    OdometryIncrement,
+    RobotMessage,
+    RobotSighting,
+)
+from acslam.pipeline.stages import AssociationResult, Localizer
+
+
+@dataclass(frozen=True)
+class KeptScan:
+    """A scan the localizer kept: its index, the scan as received, and its mappable beams."""
+
+    index: int
+    received: LidarScan
+    mappable: LidarScan
+
+
+@dataclass(frozen=True)
+class Localized:
+    """What one batch of messages gave: the kept scans, and what each landmark frame's
+    points became (the frame, one result per point)."""
+
+    scans: list[KeptScan]
+    landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]]
+
+
+class Perception:
+    """Feeds a localizer and filters each kept scan for mapping.
+
+    A beam that ends within ``robot_reach_m`` of another robot's estimated position is
+    dropped before mapping and matching: robots are not walls, and their returns would
+    stay in the map after they moved on. Invalid (0) readings are dropped too.
+    """
+
+    def __init__(self, localizer: Localizer, robot_ids: Iterable[int], robot_reach_m: float):
+        self.localizer = localizer
+        self.robot_ids = list(robot_ids)
+        self.robot_reach_m = robot_reach_m
+
+    def localize(self, messages: Iterable[RobotMessage], close_loops: bool) -> Localized:
+        """Ingest, match the new scans, optimize; returns the kept scans for the mapper."""
+        received: list[tuple[int, LidarScan]] = []
+        landmarks = []
+        for message in messages:
+            if isinstance(message, OdometryIncrement):
+                self.localizer.add_odometry(message)
+            elif isinstance(message, LandmarkObservations):
+                landmarks.append((message, self.localizer.add_landmarks(message)))
+            elif isinstance(message, RobotSighting):
+                self.localizer.add_sighting(message)
+            elif isinstance(message, LidarScan):
+                index = self.localizer.add_scan(message)
+                if index is not None:
+                    received.append((index, message))
+        scans = [
+            KeptScan(index, scan, self._mappable(scan, self.localizer.scan_pose(index)))
+            for index, scan in received
+        ]
+        for scan in scans:
+            self.localizer.match_scan(scan.index, scan.mappable)
+        self.localizer.optimize(close_loops=close_loops)
+        return Localized(scans, landmarks)
+
+    def _mappable(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
+        keep = scan.ranges > 0
+        angles = scan.angles + pose[2]
+        ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+        for j in self.robot_ids:
+            if j != scan.robot_id:
+                with np.errstate(invalid="ignore"):
+                    near = np.linalg.norm(ends - self.localizer.latest_pose(j)[:2], axis=1)
+                    keep &= ~(near < self.robot_reach_m)
+        if keep.all():
+            return scan
+        return LidarScan(
+            scan.robot_id, scan.stamp, scan.angles[keep], scan.ranges[keep], scan.range_max_m
+        )

@@ -1,0 +1,101 @@
+"""LiDAR scans attached to keyframes: each scan is stored once, with the keyframe it was
+made after and the odometry offset since, so its world pose follows the keyframe's
+optimised pose; scan matches become factors between keyframes."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import gtsam
+import numpy as np
+
+from acslam.geometry import between, compose
+from acslam.messages import LidarScan
+from acslam.slam import keys
+from acslam.slam.factors import planar_to_pose3, pose3_to_planar
+
+if TYPE_CHECKING:
+    from acslam.slam.backend import SlamBackend
+
+
+def inverse(pose: np.ndarray) -> np.ndarray:
+    """SE(2) inverse of ``[x, y, theta]``."""
+    return between(pose, np.zeros(3))
+
+
+class KeyframeScans:
+    """The scans of a :class:`~acslam.slam.backend.SlamBackend`, numbered in arrival order."""
+
+    def __init__(self, backend: SlamBackend) -> None:
+        self.backend = backend
+        self._scans: list[tuple[LidarScan, int, np.ndarray]] = []
+        self._by_keyframe: dict[int, list[int]] = {}
+
+    def add(self, msg: LidarScan) -> int | None:
+        """Store a scan with its robot's latest keyframe and the odometry offset since it.
+
+        Returns the scan's index (for :meth:`pose`), or None if it was skipped.
+        """
+        robot = self.backend.accept("scan", msg.robot_id, msg.stamp)
+        if robot is None:
+            return None
+        index = len(self._scans)
+        keyframe = robot.pose_keys[-1]
+        self._scans.append((msg, keyframe, robot.offset.copy()))
+        self._by_keyframe.setdefault(keyframe, []).append(index)
+        return index
+
+    def pose(self, index: int) -> np.ndarray:
+        """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
+        _, key, offset = self._scans[index]
+        return compose(pose3_to_planar(self.backend.pose_estimate(key)), offset)
+
+    def keyframe(self, index: int) -> tuple[int, int]:
+        """``(robot_id, keyframe_index)`` stored scan ``index`` is attached to."""
+        return keys.decode_pose_key(self._scans[index][1])
+
+    def of_keyframes(self, keyframes: list[tuple[int, int]]) -> list[int]:
+        """Indices of the scans attached to the ``(robot_id, index)`` keyframes."""
+        found: list[int] = []
+        for robot_id, index in keyframes:
+            found.extend(self._by_keyframe.get(keys.pose_key(robot_id, index), []))
+        return found
+
+    def posed(self) -> list[tuple[LidarScan, np.ndarray]]:
+        """Every stored scan with its current world pose ``[x, y, theta]``."""
+        return [(scan, self.pose(i)) for i, (scan, _, _) in enumerate(self._scans)]
+
+    def add_constraint(
+        self,
+        index_a: int,
+        index_b: int,
+        relative: np.ndarray,
+        covariance: np.ndarray,
+        robust: bool,
+    ) -> None:
+        """A scan match as a factor between the two scans' keyframes.
+
+        ``relative`` is scan b's sensor pose in scan a's frame with its 3x3 covariance
+        ``[x, y, theta]``; with the scans' offsets from their keyframes it becomes
+        kf_a^-1 kf_b = off_a * relative * off_b^-1. The covariance is rotated by off_a's
+        heading (offsets are the odometry since the keyframe: small). ``robust`` adds a
+        Huber kernel (loop closures).
+        """
+        config = self.backend.config
+        _, key_a, offset_a = self._scans[index_a]
+        _, key_b, offset_b = self._scans[index_b]
+        between_keyframes = compose(compose(offset_a, relative), inverse(offset_b))
+        c, s = np.cos(offset_a[2]), np.sin(offset_a[2])
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        planar = rotation @ np.asarray(covariance, dtype=float) @ rotation.T
+        full = np.diag(np.full(6, config.planar_sigma**2))
+        order = [3, 4, 2]  # GTSAM Pose3 tangent: rotation (roll, pitch, yaw), then x, y, z
+        full[np.ix_(order, order)] = planar
+        noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Covariance(full)
+        if robust:
+            noise = gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Huber.Create(config.huber_k), noise
+            )
+        self.backend.add_factor(
+            gtsam.BetweenFactorPose3(key_a, key_b, planar_to_pose3(between_keyframes), noise)
+        )

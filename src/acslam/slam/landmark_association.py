@@ -1,0 +1,386 @@
+"""Landmark observations into the team's graph: joint association of each frame's points,
+tentative landmarks, known identities, and robot-to-robot sightings.
+
+The points of one frame are associated jointly (:mod:`acslam.slam.association`); see
+:class:`~acslam.config.SlamConfig` for the gates. A new landmark is tentative until the
+same robot sees it in ``landmark_confirmations`` frames; its observations wait outside the
+graph until then.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from acslam.errors import SlamError
+from acslam.messages import LandmarkObservations
+from acslam.pipeline.stages import AssociationResult
+from acslam.slam import keys
+from acslam.slam.association import (
+    assign_frame,
+    euclidean_gate,
+    exclusive_probabilities,
+    innovation_covariance,
+    mahalanobis_sq,
+    measurement_covariance,
+    pose_lever_jacobian,
+)
+from acslam.slam.factors import (
+    observation_factor,
+    observation_noise,
+    robot_observation_factor,
+    sensor_covariance,
+)
+
+if TYPE_CHECKING:
+    from acslam.config import SlamConfig
+    from acslam.slam.backend import SlamBackend, _Robot
+
+
+@dataclass
+class _Tentative:
+    """A landmark seen but not yet confirmed: its observations wait outside the graph."""
+
+    robot_id: int
+    observations: list[tuple[int, np.ndarray, np.ndarray]]  # (pose key, z_kf, cov_kf)
+    kf_index: int
+    stamp: float
+
+
+@dataclass
+class _Frame:
+    """One frame's points: z in the latest keyframe (``kf``, with ``cov_kf``), z in the
+    world, and the world covariance of T z from the sensor alone and with the pose
+    marginal (``cov``)."""
+
+    pose_key: int
+    kf: list[np.ndarray] = field(default_factory=list)
+    cov_kf: list[np.ndarray] = field(default_factory=list)
+    world: list[np.ndarray] = field(default_factory=list)
+    sensor: list[np.ndarray] = field(default_factory=list)
+    cov: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass
+class _Scores:
+    """Squared Mahalanobis distances and Gaussian log-normalisers, points x columns
+    (confirmed landmarks, then this robot's tentatives)."""
+
+    d2: np.ndarray
+    log_norm: np.ndarray
+    confirmed: list[int]
+    tentatives: list[_Tentative]
+
+
+def to_keyframe(
+    config: SlamConfig, robot: _Robot, point: np.ndarray, offset_cov: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A point seen now -> the robot's latest keyframe frame, with its covariance: the
+    sensor's, rotated by the offset's heading, plus the offset's odometry uncertainty."""
+    offset = robot.offset
+    c, s = np.cos(offset[2]), np.sin(offset[2])
+    offset_rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    rotated = offset_rot @ point
+    point_kf = rotated + np.array([offset[0], offset[1], 0.0])
+    jac_offset = np.array([[1.0, 0.0, -rotated[1]], [0.0, 1.0, rotated[0]], [0.0, 0.0, 0.0]])
+    sensor_cov = sensor_covariance(config, point)
+    cov_kf = offset_rot @ sensor_cov @ offset_rot.T + jac_offset @ offset_cov @ jac_offset.T
+    return point_kf, cov_kf
+
+
+def chain_variance(robot: _Robot, since: int, now: int, lever_sq: float) -> float:
+    """Planar position variance the odometry chain from keyframe ``since`` to ``now`` adds
+    to a point seen at squared range ``lever_sq`` (heading error x lever arm)."""
+    var_xy = robot.cum_var_xy[now] - robot.cum_var_xy[since]
+    var_th = robot.cum_var_theta[now] - robot.cum_var_theta[since]
+    length = robot.cum_distance_m[now] - robot.cum_distance_m[since]
+    return var_xy + var_th * (length**2 + lever_sq)
+
+
+class LandmarkAssociation:
+    """Adds a :class:`~acslam.slam.backend.SlamBackend`'s landmark and sighting factors."""
+
+    def __init__(self, backend: SlamBackend) -> None:
+        self.backend = backend
+        self.config = backend.config
+        self._known_landmarks: dict[int, int] = {}
+        self._tentatives: list[_Tentative] = []
+        self.robot_observations = 0
+        self.dropped_ambiguous = 0
+        self.tentative_observations = 0
+        self.expired_tentatives = 0
+
+    # ------------------------------------------------------------------ landmarks
+
+    def add_landmarks(self, msg: LandmarkObservations) -> list[AssociationResult]:
+        """Associate the frame's points jointly and add their factors; points that carry
+        identities (``msg.ids``) skip association and are used as identified."""
+        backend = self.backend
+        robot = backend.accept("landmarks", msg.robot_id, msg.stamp)
+        if robot is None or len(msg.points) == 0:
+            return []
+        points = np.asarray(msg.points, dtype=float).reshape(-1, 3)
+        finite = np.isfinite(points).all(axis=1)
+        if not finite.all():  # non-finite points are skipped (counted), the rest are used
+            skipped = backend.skipped_messages
+            skipped["landmark_points"] = skipped.get("landmark_points", 0) + int((~finite).sum())
+        results = [AssociationResult(-1, False, {}) for _ in points]
+        if not finite.any():
+            return results
+        frame = self._frame(robot, points[finite])
+        if msg.ids is not None:
+            used = self._add_known(frame, [int(k) for k in msg.ids[finite]])
+        else:
+            used = self._associate_frame(robot, msg.stamp, frame)
+        for i, result in zip(np.flatnonzero(finite), used, strict=True):
+            results[i] = result
+        return results
+
+    def _frame(self, robot: _Robot, points: np.ndarray) -> _Frame:
+        backend = self.backend
+        pose_key = robot.pose_keys[-1]
+        pose = backend.pose_estimate(pose_key)
+        rotation = pose.rotation().matrix()
+        pose_cov = backend.pose_covariance(robot)
+        offset_cov = backend.offset_covariance(robot)
+        frame = _Frame(pose_key)
+        for point in points:
+            point_kf, cov_kf = to_keyframe(self.config, robot, point, offset_cov)
+            frame.kf.append(point_kf)
+            frame.cov_kf.append(cov_kf)
+            frame.world.append(np.asarray(pose.transformFrom(point_kf)))
+            frame.sensor.append(rotation @ cov_kf @ rotation.T)
+            frame.cov.append(measurement_covariance(rotation, point_kf, cov_kf, pose_cov))
+        return frame
+
+    def _add_factor(self, pose_key: int, index: int, point_kf, cov_kf, probability: float) -> None:
+        noise = observation_noise(cov_kf, probability, self.config.huber_k)
+        factor = observation_factor(pose_key, keys.landmark_key(index), point_kf, noise)
+        self.backend.add_factor(factor)
+
+    def _add_known(self, frame: _Frame, known_ids: list[int]) -> list[AssociationResult]:
+        results = []
+        for n, known in enumerate(known_ids):
+            index = self._known_landmarks.get(int(known))
+            is_new = index is None
+            if is_new:
+                index = self.backend.new_landmark(frame.world[n], frame.cov[n])
+                self._known_landmarks[int(known)] = index
+            self._add_factor(frame.pose_key, index, frame.kf[n], frame.cov_kf[n], 1.0)
+            results.append(AssociationResult(index, is_new, {index: 1.0}))
+        return results
+
+    # ------------------------------------------------------------------ joint association
+
+    def _associate_frame(
+        self, robot: _Robot, stamp: float, frame: _Frame
+    ) -> list[AssociationResult]:
+        """Joint association of one frame (see :mod:`acslam.slam.association`).
+
+        Columns are the confirmed landmarks within the Euclidean pre-gate of some point and
+        this robot's live tentative landmarks. Innovation covariances use the pose-landmark
+        cross-covariance from iSAM2 for confirmed landmarks, and for a tentative one the
+        odometry chain between the keyframe it was last seen from and now.
+        """
+        self._expire_tentatives(robot.robot_id, stamp)
+        scores = self._score_frame(robot, frame)
+        assigned = assign_frame(scores.d2, self.config.association_mahalanobis_gate)
+        results: list[AssociationResult] = []
+        new_points: list[int] = []
+        for n in range(len(frame.world)):
+            others = np.zeros(scores.d2.shape[1], dtype=bool)
+            for m in range(len(frame.world)):
+                if m != n and assigned[m] >= 0:
+                    others[assigned[m]] = True
+            result = self._decide(robot, stamp, frame, scores, n, int(assigned[n]), others)
+            if result is None:
+                new_points.append(n)
+                result = AssociationResult(-1, True, {}, tentative=True)
+            results.append(result)
+        for n in new_points:
+            tentative = _Tentative(robot.robot_id, [], len(robot.pose_keys) - 1, stamp)
+            self._tentatives.append(tentative)
+            results[n] = self._observe_tentative(robot, stamp, tentative, frame, n)
+        return results
+
+    def _score_frame(self, robot: _Robot, frame: _Frame) -> _Scores:
+        backend = self.backend
+        world = np.array(frame.world)
+        positions = backend.landmark_positions
+        per_point = [
+            euclidean_gate(p, positions, self._gate_radius(cov))
+            for p, cov in zip(world, frame.cov, strict=True)
+        ]
+        confirmed = sorted({int(i) for g in per_point for i in g})
+        tentatives = [t for t in self._tentatives if t.robot_id == robot.robot_id]
+        n_cols = len(confirmed) + len(tentatives)
+        scores = _Scores(
+            np.full((len(world), n_cols), np.inf), np.zeros((len(world), n_cols)), confirmed,
+            tentatives,
+        )  # fmt: skip
+        if not n_cols:
+            return scores
+        ref_key, ref_pose, ref_cov = backend.reference(robot)
+        ref_rot = ref_pose.rotation().matrix()
+        lm_covs, cross = backend.landmark_blocks(ref_key, confirmed)
+        col_of = {i: c for c, i in enumerate(confirmed)}
+        now_index = len(robot.pose_keys) - 1
+        tent_geometry = []
+        for t in tentatives:
+            key, z_kf, cov_kf = t.observations[-1]
+            pose = backend.pose_estimate(key)
+            rot = pose.rotation().matrix()
+            tent_geometry.append((np.asarray(pose.transformFrom(z_kf)), rot @ cov_kf @ rot.T))
+        for n in range(len(world)):
+            lever = pose_lever_jacobian(ref_rot, np.asarray(ref_pose.transformTo(world[n])))
+            for i in per_point[n]:
+                c = col_of[int(i)]
+                s = innovation_covariance(lever, ref_cov, lm_covs[c], cross[c], frame.sensor[n])
+                self._score(scores, n, c, world[n] - positions[i], s)
+            rho2 = float(frame.kf[n][:2] @ frame.kf[n][:2])
+            for k, (position, cov) in enumerate(tent_geometry):
+                innovation = world[n] - position
+                if np.linalg.norm(innovation) > self.config.association_gate_m:
+                    continue
+                chain = chain_variance(robot, tentatives[k].kf_index, now_index, rho2)
+                s = frame.sensor[n] + cov + np.diag([chain, chain, 0.0])
+                self._score(scores, n, len(confirmed) + k, innovation, s)
+        return scores
+
+    def _decide(
+        self,
+        robot: _Robot,
+        stamp: float,
+        frame: _Frame,
+        scores: _Scores,
+        n: int,
+        column: int,
+        others: np.ndarray,
+    ) -> AssociationResult | None:
+        """What point ``n``, assigned ``column`` (-1: none), becomes; None: a new landmark.
+        ``others`` marks the columns other points of the frame took."""
+        cfg = self.config
+        gate = cfg.association_mahalanobis_gate
+        d2, log_norm, confirmed = scores.d2, scores.log_norm, scores.confirmed
+        if column < 0:
+            near = d2[n] < cfg.new_landmark_mahalanobis_gate
+            if (near & ~others).any():
+                self.dropped_ambiguous += 1
+                return AssociationResult(-1, False, {})
+            return None
+        # A confirmed landmark in the gate takes precedence over this robot's tentatives:
+        # a tentative that competes with one is most likely its duplicate (seen by this
+        # robot before another robot's observations confirmed it), and letting the two
+        # split the probability would drop every point until the tentative expires.
+        excluded = others.copy()
+        n_conf = len(confirmed)
+        row = np.where(others[:n_conf], np.inf, d2[n, :n_conf])
+        if column >= n_conf and n_conf and row.min() <= gate:
+            column = int(np.argmin(row))
+        if column < n_conf:
+            excluded[n_conf:] = True
+        cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, excluded)
+        best = float(probs[cols == column][0])
+        if best < cfg.association_min_best_probability:
+            self.dropped_ambiguous += 1
+            return AssociationResult(-1, False, {})
+        if column >= n_conf:
+            tentative = scores.tentatives[column - n_conf]
+            return self._observe_tentative(robot, stamp, tentative, frame, n)
+        soft = {
+            confirmed[c]: float(p)
+            for c, p in zip(cols, probs, strict=True)
+            if c < n_conf and p >= cfg.association_min_probability
+        }
+        total = sum(soft.values())
+        soft = {i: p / total for i, p in soft.items()}
+        for index, probability in soft.items():
+            self._add_factor(frame.pose_key, index, frame.kf[n], frame.cov_kf[n], probability)
+        return AssociationResult(confirmed[column], False, soft)
+
+    def _gate_radius(self, point_cov: np.ndarray) -> float:
+        """Euclidean pre-gate of a point: ``association_gate_m``, widened to the Mahalanobis
+        gate of the point's own world covariance (pose marginal included) so that a robot
+        whose estimate drifted further than the fixed gate can still find its landmarks."""
+        widest = float(np.linalg.eigvalsh(point_cov)[-1])
+        return max(
+            self.config.association_gate_m,
+            float(np.sqrt(self.config.association_mahalanobis_gate * widest)),
+        )
+
+    @staticmethod
+    def _score(scores: _Scores, n: int, c: int, innovation: np.ndarray, s: np.ndarray) -> None:
+        scores.d2[n, c] = mahalanobis_sq(innovation, s)
+        if np.isfinite(scores.d2[n, c]):
+            scores.log_norm[n, c] = 0.5 * (3 * np.log(2 * np.pi) + np.linalg.slogdet(s)[1])
+
+    # ------------------------------------------------------------------ tentatives
+
+    def _observe_tentative(
+        self, robot: _Robot, stamp: float, tentative: _Tentative, frame: _Frame, n: int
+    ) -> AssociationResult:
+        """Buffer an observation of a tentative landmark; confirm it once seen often enough."""
+        tentative.observations.append((frame.pose_key, frame.kf[n], frame.cov_kf[n]))
+        tentative.kf_index = len(robot.pose_keys) - 1
+        tentative.stamp = stamp
+        if len(tentative.observations) < self.config.landmark_confirmations:
+            self.tentative_observations += 1
+            return AssociationResult(-1, True, {}, tentative=True)
+        self._tentatives.remove(tentative)
+        index = self.backend.new_landmark(frame.world[n], frame.cov[n])
+        for pose_key, z_kf, cov_kf in tentative.observations:
+            self._add_factor(pose_key, index, z_kf, cov_kf, 1.0)
+        return AssociationResult(index, True, {index: 1.0})
+
+    def _expire_tentatives(self, robot_id: int, stamp: float) -> None:
+        timeout = self.config.tentative_timeout_s
+        keep = []
+        for t in self._tentatives:
+            if t.robot_id == robot_id and stamp - t.stamp > timeout:
+                self.expired_tentatives += 1
+            else:
+                keep.append(t)
+        self._tentatives = keep
+
+    # ------------------------------------------------------------------ sightings
+
+    def add_robot_observation(
+        self, observer_id: int, observed_id: int, stamp: float, point: np.ndarray
+    ) -> bool:
+        """Robot ``observed_id`` seen by robot ``observer_id`` at ``point`` (observer frame).
+
+        The observed robot's identity must come from a recognition signal of its own (e.g.
+        a marker on it), so no association is needed. The factor ties both robots' latest
+        keyframes: the point enters the observer's keyframe frame as a landmark point does,
+        and the observed robot stands at the odometry offset since its own keyframe, whose
+        uncertainty is added to the covariance. Huber-robust like a landmark observation.
+        Returns whether a factor was added (False: skipped as out of order or non-finite).
+        """
+        backend = self.backend
+        if int(observer_id) == int(observed_id):
+            raise ValueError(f"robot {observer_id} cannot observe itself")
+        observed = backend.robot(observed_id)
+        if observed is None:
+            raise SlamError(f"observation of robot {observed_id}, which has no start pose")
+        point = np.asarray(point, dtype=float).reshape(3)
+        robot = backend.accept("robots", observer_id, stamp)
+        if robot is None:
+            return False
+        if not np.isfinite(point).all():
+            skipped = backend.skipped_messages
+            skipped["robot_points"] = skipped.get("robot_points", 0) + 1
+            return False
+        point_kf, cov_kf = to_keyframe(self.config, robot, point, backend.offset_covariance(robot))
+        target_var = backend.offset_covariance(observed)[0, 0]
+        cov_kf = cov_kf + np.diag([target_var, target_var, 0.0])
+        noise = observation_noise(cov_kf, 1.0, self.config.huber_k)
+        target = np.array([observed.offset[0], observed.offset[1], 0.0])
+        backend.add_factor(
+            robot_observation_factor(
+                robot.pose_keys[-1], observed.pose_keys[-1], point_kf, target, noise
+            )
+        )
+        self.robot_observations += 1
+        return True

@@ -1,0 +1,43 @@
+"""Where robot messages come from: the simulator, a recording, or robots on a network.
+
+Every source implements :class:`DataSource`, so the server and the replays never know
+which one they are fed by. A closed-loop source (the simulator, live robots) carries the
+server's commands back; a recording ignores them.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from acslam.messages import RobotMessage
+from acslam.pipeline.snapshot import Snapshot
+
+
+class DataSource(Protocol):
+    """Messages per control period, on the source's own clock."""
+
+    @property
+    def time_s(self) -> float:
+        """Simulated, log or wall seconds: the clock the messages are stamped on."""
+        ...
+
+    @property
+    def finished(self) -> bool:
+        """True once a recording has no more messages (never for a live source)."""
+        ...
+
+    def newly_lost(self) -> list[int]:
+        """Robots that stopped answering since the last call (each reported once)."""
+        ...
+
+    def receive(self) -> list[RobotMessage]:
+        """The messages that arrived since the last call, in arrival order."""
+        ...
+
+    def deliver(self, snapshot: Snapshot) -> None:
+        """Send the step's commands (and whatever the robots are told of the server)."""
+        ...
+
+    def advance(self) -> None:
+        """Let the robots run (or the recording play) until the next period."""
+        ...
