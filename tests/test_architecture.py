@@ -17,7 +17,7 @@ from acslam.pipeline.registry import REGISTRIES
 
 PACKAGE = Path(acslam.__file__).parent
 STAGE_PACKAGES = ("slam", "mapping", "exploration", "planning", "pipeline")
-SERVER_SIDE = (*STAGE_PACKAGES, "messages.py", "features.py")
+SERVER_SIDE = (*STAGE_PACKAGES, "messages.py", "sources/orb.py")
 FORBIDDEN_IN_STAGES = ("acslam.sim", "acslam.eval", "matplotlib")
 
 

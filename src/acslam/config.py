@@ -296,6 +296,12 @@ class SlamConfig(StageParams):
     association_min_probability: Probability = 0.05
     landmark_confirmations: Annotated[int, Field(ge=1)] = 3
     tentative_timeout_s: PositiveFloat = 10.0
+    # A point and a landmark that both carry binary descriptors (ORB: 256 bits) are
+    # candidates only within this Hamming distance; ORB-SLAM matches within 50-100 bits.
+    association_max_descriptor_bits: Annotated[int, Field(ge=0)] = 64
+    # ... and only within this many bits of the closest candidate's descriptor (matched
+    # ORB points of the TUM fr1/xyz desk differ by 11-37 bits, 10th-90th percentile).
+    association_descriptor_margin_bits: Annotated[int, Field(ge=0)] = 10
     isam_relinearize_threshold: PositiveFloat = 0.05
     isam_relinearize_skip: Annotated[int, Field(ge=1)] = 10
     isam_factorization: Literal["CHOLESKY", "QR"] = "CHOLESKY"

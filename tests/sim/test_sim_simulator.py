@@ -174,10 +174,13 @@ def test_camera_ground_truth_goes_to_the_side_channel_only() -> None:
         assert len(ids) == len(message.points)
     assert any(len(m.points) for m in cameras)
     fields = {f.name for f in dataclasses.fields(LandmarkObservations)}
-    assert fields == {"robot_id", "stamp", "points", "descriptors"}
+    # ``ids`` are identities a real sensor recognises itself (fiducials, barcodes); the
+    # simulated camera recognises none, so the true ids stay in the side channel.
+    assert fields == {"robot_id", "stamp", "points", "descriptors", "ids"}
+    assert all(m.ids is None for m in cameras)
     for kind in (OdometryIncrement, LidarScan, LandmarkObservations, VelocityCommand):
         names = {f.name for f in dataclasses.fields(kind)}
-        assert not names & {"ids", "landmark_ids", "true_pose", "pose", "ground_truth"}
+        assert not names & {"landmark_ids", "true_pose", "pose", "ground_truth"}
 
 
 def test_invalid_starts_and_commands_are_rejected() -> None:

@@ -327,3 +327,25 @@ def test_moved_keyframes_are_measured_from_their_last_report() -> None:
     assert backend._report_moves(three, positions) == []
     positions[2, 1] = 0.06
     assert backend._report_moves(three, positions) == [(0, 3)]
+
+
+def test_descriptors_keep_a_different_looking_point_off_a_landmark() -> None:
+    """Two points at the same place: with the landmark's own descriptor the second frame's
+    point is that landmark; with a descriptor 128 of 256 bits away it may not be (the
+    Hamming gate is 64 bits), so it starts a landmark of its own."""
+    rng = np.random.default_rng(5)
+    seen = rng.integers(0, 256, (1, 32), dtype=np.uint8)
+    other = seen.copy()
+    other[0, :16] ^= 0xFF  # 16 bytes x 8 bits = 128 bits differ
+    point = np.array([[1.5, 0.2, 0.3]])
+    backend = SlamBackend(SlamConfig(landmark_confirmations=1), {0: np.zeros(3)})
+    (first,) = backend.add_landmarks(LandmarkObservations(0, 0.1, point, descriptors=seen))
+    backend.update()
+    (same,) = backend.add_landmarks(LandmarkObservations(0, 0.2, point, descriptors=seen))
+    (different,) = backend.add_landmarks(LandmarkObservations(0, 0.3, point, descriptors=other))
+    (plain,) = backend.add_landmarks(LandmarkObservations(0, 0.4, point))
+    assert first.is_new and first.landmark == 0
+    assert (same.landmark, same.is_new) == (0, False)
+    assert different.is_new and different.landmark == 1
+    # Without descriptors geometry alone decides: two landmarks in the gate, ambiguous.
+    assert plain.landmark == -1 and not plain.is_new

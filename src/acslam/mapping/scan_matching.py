@@ -372,6 +372,63 @@ def _noise_information(
     return info
 
 
+@dataclass
+class _Residuals:
+    """Per query point, what the last accumulation left: whitened Jacobian rows, residuals
+    and their sigmas (zero rows: no correspondence)."""
+
+    weighted_jacobians: np.ndarray
+    residuals: np.ndarray
+    sigmas: np.ndarray
+
+    @classmethod
+    def empty(cls, count: int) -> _Residuals:
+        return cls(np.zeros((count, 3)), np.zeros(count), np.ones(count))
+
+    def _norms(self) -> np.ndarray:
+        return self.weighted_jacobians[:, 0] ** 2 + self.weighted_jacobians[:, 1] ** 2
+
+    def matched(self) -> np.ndarray:
+        return self._norms() > 0
+
+    def matched_count(self) -> int:
+        return int(np.count_nonzero(self._norms()))
+
+
+def _linearize(
+    pose: np.ndarray,
+    reference: PreparedScan,
+    query: PreparedScan,
+    params: np.ndarray,
+    out: _Residuals,
+) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """Correspondences within the gate ``params[0]`` at ``pose``, and the data term's
+    Hessian, gradient and inlier count there; also returns the matches."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    moved = query.points_m @ np.array([[c, s], [-s, c]]) + pose[:2]
+    distance, match = reference.tree.query(moved, distance_upper_bound=params[0])
+    match[~np.isfinite(distance)] = -1
+    hessian, gradient, inliers = _accumulate(
+        pose, query.points_m, query.directions, query.ranges_m, match, distance,
+        reference.line_points_m, reference.line_normals, reference.line_ok,
+        reference.line_variance_m2, reference.line_curvature, params, out.weighted_jacobians,
+        out.residuals, out.sigmas,
+    )  # fmt: skip
+    return hessian, gradient, inliers, match
+
+
+def _settings(config: ScanMatchingConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The prior's information at the guess, the noise model, the kernel parameters."""
+    prior = np.diag(
+        [config.prior_sigma_m**-2, config.prior_sigma_m**-2, config.prior_sigma_rad**-2]
+    )
+    noise = np.array([config.range_noise_std_m, config.range_noise_rel, config.angle_noise_std_rad])
+    params = np.array(
+        [0.0, config.huber_k, *noise, config.min_sigma_m, config.inlier_sigmas], dtype=float
+    )
+    return prior, noise, params
+
+
 def match_scans(
     reference: PreparedScan,
     query: PreparedScan,
@@ -385,47 +442,67 @@ def match_scans(
     the gate has shrunk to its floor and the step is below the tolerances.
     """
     initial = np.asarray(initial_guess, dtype=float).copy()
+    prior, noise, params = _settings(config)
+    out = _Residuals.empty(len(query.points_m))
+    enough = len(reference.points_m) >= 3 and len(query.points_m) >= config.min_correspondences
+    if not enough:
+        return ScanMatchResult(initial, np.linalg.inv(prior), 0.0, math.inf, 0, False)
+    pose, iterations, converged = _iterate(reference, query, initial, config, prior, params, out)
+    if iterations == 0:
+        return ScanMatchResult(initial, np.linalg.inv(prior), 0.0, math.inf, 0, False)
+    # Statistics and covariance at the final pose (residuals refreshed there).
+    data_hessian, _, inlier_count, match = _linearize(pose, reference, query, params, out)
+    whitened = np.abs(out.residuals) / out.sigmas
+    inliers = out.matched() & (whitened <= config.inlier_sigmas)
+    info = _noise_information(
+        pose, query.directions, query.ranges_m, match, out.weighted_jacobians,
+        reference.directions, reference.ranges_m, reference.line_normals,
+        reference.line_support, reference.line_weights, noise,
+    )  # fmt: skip
+    hessian_inv = np.linalg.inv(data_hessian + prior)
+    covariance = hessian_inv @ (info + prior) @ hessian_inv
+    if inlier_count > 0:
+        covariance *= max(1.0, float(np.mean(whitened[inliers] ** 2)))
+    covariance = 0.5 * (covariance + covariance.T) + np.diag(
+        [config.covariance_floor_m**2, config.covariance_floor_m**2, config.covariance_floor_rad**2]
+    )
+    rms = float(np.sqrt(np.mean(out.residuals[inliers] ** 2))) if inlier_count else math.inf
+    return ScanMatchResult(
+        relative=pose,
+        covariance=covariance,
+        inlier_ratio=inlier_count / len(query.points_m),
+        rms_residual_m=rms,
+        iterations=iterations,
+        converged=converged,
+    )
+
+
+def _iterate(
+    reference: PreparedScan,
+    query: PreparedScan,
+    initial: np.ndarray,
+    config: ScanMatchingConfig,
+    prior: np.ndarray,
+    params: np.ndarray,
+    out: _Residuals,
+) -> tuple[np.ndarray, int, bool]:
+    """Gauss-Newton from ``initial`` with a shrinking gate; returns the pose, the
+    iterations run and whether it converged (``params[0]`` is left at the last gate)."""
     pose = initial.copy()
-    n_query = len(query.points_m)
-    weighted_jacobians = np.zeros((n_query, 3))
-    residuals = np.zeros(n_query)
-    sigmas = np.ones(n_query)
-    prior = np.diag(
-        [config.prior_sigma_m**-2, config.prior_sigma_m**-2, config.prior_sigma_rad**-2]
-    )
-    noise = np.array([config.range_noise_std_m, config.range_noise_rel, config.angle_noise_std_rad])
-    params = np.array(
-        [0.0, config.huber_k, *noise, config.min_sigma_m, config.inlier_sigmas], dtype=float
-    )
-    hessian = prior.copy()
-    converged = False
-    iterations = 0
-    enough = len(reference.points_m) >= 3 and n_query >= config.min_correspondences
     gate_m = config.gate_initial_m
     two_back: np.ndarray | None = None
-    while enough and iterations < config.max_iterations:
+    iterations = 0
+    while iterations < config.max_iterations:
         iterations += 1
         at_floor = gate_m <= config.gate_min_m
         gate_m = max(config.gate_min_m, gate_m)
         params[0] = gate_m
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        moved = query.points_m @ np.array([[c, s], [-s, c]]) + pose[:2]
-        distance, match = reference.tree.query(moved, distance_upper_bound=gate_m)
-        match[~np.isfinite(distance)] = -1
-        data_hessian, gradient, _ = _accumulate(
-            pose, query.points_m, query.directions, query.ranges_m, match, distance,
-            reference.line_points_m, reference.line_normals, reference.line_ok,
-            reference.line_variance_m2, reference.line_curvature, params, weighted_jacobians,
-            residuals, sigmas,
-        )  # fmt: skip
-        if np.count_nonzero(weighted_jacobians[:, 0] ** 2 + weighted_jacobians[:, 1] ** 2) < (
-            config.min_correspondences
-        ):
+        data_hessian, gradient, _, _ = _linearize(pose, reference, query, params, out)
+        if out.matched_count() < config.min_correspondences:
             break
         offset = pose - initial
         offset[2] = wrap_angle(offset[2])
-        hessian = data_hessian + prior
-        step = -np.linalg.solve(hessian, gradient + prior @ offset)
+        step = -np.linalg.solve(data_hessian + prior, gradient + prior @ offset)
         pose += step
         pose[2] = wrap_angle(pose[2])
         gate_m *= config.gate_decay
@@ -440,48 +517,9 @@ def match_scans(
             pose -= 0.5 * step
             small = True
         if at_floor and small:
-            converged = True
-            break
+            return pose, iterations, True
         two_back = pose - step
-    if not enough or iterations == 0:
-        return ScanMatchResult(initial, np.linalg.inv(prior), 0.0, math.inf, iterations, False)
-    # Statistics and covariance at the final pose (residuals refreshed there).
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    moved = query.points_m @ np.array([[c, s], [-s, c]]) + pose[:2]
-    distance, match = reference.tree.query(moved, distance_upper_bound=params[0])
-    match[~np.isfinite(distance)] = -1
-    data_hessian, _, inlier_count = _accumulate(
-        pose, query.points_m, query.directions, query.ranges_m, match, distance,
-        reference.line_points_m, reference.line_normals, reference.line_ok,
-        reference.line_variance_m2, reference.line_curvature, params, weighted_jacobians,
-        residuals, sigmas,
-    )  # fmt: skip
-    whitened = np.abs(residuals) / sigmas
-    inliers = (weighted_jacobians[:, 0] ** 2 + weighted_jacobians[:, 1] ** 2 > 0) & (
-        whitened <= config.inlier_sigmas
-    )
-    info = _noise_information(
-        pose, query.directions, query.ranges_m, match, weighted_jacobians,
-        reference.directions, reference.ranges_m, reference.line_normals,
-        reference.line_support, reference.line_weights, noise,
-    )  # fmt: skip
-    hessian = data_hessian + prior
-    hessian_inv = np.linalg.inv(hessian)
-    covariance = hessian_inv @ (info + prior) @ hessian_inv
-    if inlier_count > 0:
-        covariance *= max(1.0, float(np.mean(whitened[inliers] ** 2)))
-    covariance = 0.5 * (covariance + covariance.T) + np.diag(
-        [config.covariance_floor_m**2, config.covariance_floor_m**2, config.covariance_floor_rad**2]
-    )
-    rms = float(np.sqrt(np.mean(residuals[inliers] ** 2))) if inlier_count else math.inf
-    return ScanMatchResult(
-        relative=pose,
-        covariance=covariance,
-        inlier_ratio=inlier_count / n_query,
-        rms_residual_m=rms,
-        iterations=iterations,
-        converged=converged,
-    )
+    return pose, iterations, False
 
 
 def verify(

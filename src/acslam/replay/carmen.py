@@ -38,6 +38,7 @@ from acslam.grid import FREE, OCCUPIED, GridSpec
 from acslam.mapping.occupancy import grid_spec_for_bounds
 from acslam.messages import LidarScan, OdometryIncrement, RobotMessage
 from acslam.pipeline.registry import MAPPERS
+from acslam.pipeline.stages import Localizer
 from acslam.replay import localize, preset
 from acslam.trajectory import write_tum
 from acslam.worlds.mapio import save_map
@@ -107,6 +108,50 @@ def _build_map(
     return mapper.occupancy_values(), spec
 
 
+def _metrics(
+    path: str | Path,
+    log: CarmenLog,
+    offset: np.ndarray,
+    scans_used: int,
+    localizer: Localizer,
+    values: np.ndarray,
+    spec: GridSpec,
+    timings_s: dict[str, float],
+) -> dict:
+    stamps = np.array([record.stamp_s for record in log.records])
+    duration_s = float(stamps[-1] - stamps[0])
+    diagnostics = localizer.diagnostics()
+    _, keyframe_poses = localizer.trajectory(0)
+    return {
+        "log": str(path),
+        "scans": len(log.scans),
+        "scans_used": scans_used,
+        "odometry_records": len(log.odometry),
+        "keyframes": len(keyframe_poses),
+        "laser_offset_xytheta": offset.tolist(),
+        "trajectory_frame": "laser (FLASER x y theta), one pose per FLASER line in file order",
+        "scan_matching": diagnostics["scan_matching"],
+        "loop_closures": diagnostics["loop_closures"],
+        "skipped_lines": {
+            "count": len(log.skipped_lines),
+            "lines": [number for number, _ in log.skipped_lines],
+        },
+        "skipped_messages": diagnostics["skipped_messages"],
+        "log_duration_s": duration_s,
+        **timings_s,
+        "real_time_factor": duration_s / timings_s["wall_time_s"],
+        "isam2_update_ms": diagnostics["isam2_update_ms"],
+        "map": {
+            "resolution_m": spec.resolution_m,
+            "rows": spec.rows,
+            "cols": spec.cols,
+            "origin_m": [spec.origin_x_m, spec.origin_y_m],
+            "occupied_cells": int((values == OCCUPIED).sum()),
+            "free_cells": int((values == FREE).sum()),
+        },
+    }
+
+
 def run_carmen(
     path: str | Path,
     out_dir: str | Path,
@@ -162,39 +207,7 @@ def run_carmen(
         )
     wall_s = time.perf_counter() - wall_start
 
-    stamps = np.array([record.stamp_s for record in log.records])
-    duration_s = float(stamps[-1] - stamps[0])
-    diagnostics = localizer.diagnostics()
-    _, keyframe_poses = localizer.trajectory(0)
-    metrics = {
-        "log": str(path),
-        "scans": len(log.scans),
-        "scans_used": len(used),
-        "odometry_records": len(log.odometry),
-        "keyframes": len(keyframe_poses),
-        "laser_offset_xytheta": offset.tolist(),
-        "trajectory_frame": "laser (FLASER x y theta), one pose per FLASER line in file order",
-        "scan_matching": diagnostics["scan_matching"],
-        "loop_closures": diagnostics["loop_closures"],
-        "skipped_lines": {
-            "count": len(log.skipped_lines),
-            "lines": [number for number, _ in log.skipped_lines],
-        },
-        "skipped_messages": diagnostics["skipped_messages"],
-        "log_duration_s": duration_s,
-        "wall_time_s": wall_s,
-        "real_time_factor": duration_s / wall_s,
-        "slam_time_s": slam_s,
-        "mapping_time_s": mapping_s,
-        "isam2_update_ms": diagnostics["isam2_update_ms"],
-        "map": {
-            "resolution_m": spec.resolution_m,
-            "rows": spec.rows,
-            "cols": spec.cols,
-            "origin_m": [spec.origin_x_m, spec.origin_y_m],
-            "occupied_cells": int((values == OCCUPIED).sum()),
-            "free_cells": int((values == FREE).sum()),
-        },
-    }
+    timings_s = {"wall_time_s": wall_s, "slam_time_s": slam_s, "mapping_time_s": mapping_s}
+    metrics = _metrics(path, log, offset, len(used), localizer, values, spec, timings_s)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics

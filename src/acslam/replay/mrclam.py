@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +32,8 @@ from acslam.eval.metrics import (
 from acslam.eval.slam_figures import plot_slam_run
 from acslam.geometry import compose, wrap_angles
 from acslam.messages import LandmarkObservations, RobotMessage, RobotSighting
-from acslam.replay import localize, preset
+from acslam.pipeline.stages import Localizer
+from acslam.replay import Replayed, localize, preset
 from acslam.trajectory import write_tum
 
 MAX_GROUNDTRUTH_GAP_S = 0.25
@@ -125,6 +126,88 @@ def mrclam_messages(
     return sorted(messages, key=lambda m: m.stamp)
 
 
+@dataclass
+class _Labels:
+    """Per associated point, its true subject and the landmark it went to; counts of the
+    points that made no factor."""
+
+    truth: np.ndarray
+    estimated: np.ndarray
+    dropped: int
+    tentative: int
+
+
+def _association_labels(replayed: Replayed, data: MrclamData) -> _Labels:
+    subjects_of = {id(data.messages[n]): subjects for n, subjects in data.point_subjects.items()}
+    truth, estimated, dropped, tentative = [], [], 0, 0
+    for frame, results in replayed.landmarks:
+        subjects = subjects_of.get(id(frame))
+        if subjects is None:  # a frame that carries its barcodes
+            subjects = frame.ids
+        for subject, result in zip(subjects, results, strict=True):
+            if result.tentative:
+                tentative += 1
+            elif result.landmark < 0:
+                dropped += 1
+            else:
+                truth.append(int(subject))
+                estimated.append(result.landmark)
+    return _Labels(np.array(truth), np.array(estimated), dropped, tentative)
+
+
+def _landmark_errors(landmarks: np.ndarray, labels: _Labels, data: MrclamData) -> dict:
+    """Per true landmark, the distance to the estimate most of its points went to."""
+    errors = {}
+    for subject, position in sorted(data.landmark_truth.items()):
+        mine = labels.estimated[labels.truth == subject]
+        if len(mine):
+            best = int(np.bincount(mine).argmax())
+            errors[str(subject)] = float(np.linalg.norm(landmarks[best, :2] - position))
+    return errors
+
+
+@dataclass
+class _Scores:
+    """Per robot: errors of SLAM and dead reckoning, the runs they pooled from, tracks."""
+
+    per_robot: dict[str, dict] = field(default_factory=dict)
+    slam_runs: list[tuple] = field(default_factory=list)
+    dr_runs: list[tuple] = field(default_factory=list)
+    slam_tracks: dict[int, np.ndarray] = field(default_factory=dict)
+    dr_tracks: dict[int, np.ndarray] = field(default_factory=dict)
+    truth_tracks: dict[int, np.ndarray] = field(default_factory=dict)
+
+
+def _score_robots(
+    localizer: Localizer, data: MrclamData, starts: dict[int, np.ndarray], out_dir: Path
+) -> _Scores:
+    """Each robot's keyframe trajectory and dead reckoning against the ground truth;
+    writes their TUM files."""
+    dead_reckoning = _dead_reckoning(data, starts)
+    scores = _Scores()
+    for robot in sorted(starts):
+        stamps, poses = localizer.trajectory(robot)
+        poses[:, 2] = np.unwrap(poses[:, 2])
+        gt_t, gt = data.groundtruth[robot]
+        dr_t, dr = dead_reckoning[robot]
+        scores.slam_runs.append((stamps, poses, gt_t, gt))
+        scores.dr_runs.append((stamps, interpolate_poses(stamps, dr_t, dr), gt_t, gt))
+        slam_err = localization_errors(*scores.slam_runs[-1], MAX_GROUNDTRUTH_GAP_S)
+        dr_err = localization_errors(*scores.dr_runs[-1], MAX_GROUNDTRUTH_GAP_S)
+        scores.per_robot[str(robot)] = {
+            "keyframes": len(stamps),
+            "slam": slam_err,
+            "dead_reckoning": dr_err,
+            "rmse_improvement_factor": dr_err["rmse_m"] / slam_err["rmse_m"],
+        }
+        scores.slam_tracks[robot], scores.dr_tracks[robot] = poses, dr
+        scores.truth_tracks[robot] = gt
+        write_tum(out_dir / f"robot{robot}_slam.tum", stamps, poses)
+        write_tum(out_dir / f"robot{robot}_dead_reckoning.tum", dr_t, dr)
+        write_tum(out_dir / f"robot{robot}_groundtruth.tum", gt_t, gt)
+    return scores
+
+
 def run_mrclam(
     path: str | Path,
     out_dir: str | Path,
@@ -149,54 +232,11 @@ def run_mrclam(
     replayed = localize(messages, algorithms, starts)
     localizer = replayed.localizer
     diagnostics = localizer.diagnostics()
-    subjects_of = {id(data.messages[n]): subjects for n, subjects in data.point_subjects.items()}
-    truth_labels, est_labels, dropped, tentative = [], [], 0, 0
-    for frame, results in replayed.landmarks:
-        subjects = subjects_of.get(id(frame))
-        if subjects is None:  # a frame that carries its barcodes
-            subjects = frame.ids
-        for subject, result in zip(subjects, results, strict=True):
-            if result.tentative:
-                tentative += 1
-            elif result.landmark < 0:
-                dropped += 1
-            else:
-                truth_labels.append(int(subject))
-                est_labels.append(result.landmark)
-
-    dead_reckoning = _dead_reckoning(data, starts)
-    slam_runs, dr_runs, metrics_robots = [], [], {}
-    slam_tracks, dr_tracks, truth_tracks = {}, {}, {}
-    for robot in sorted(starts):
-        stamps, poses = localizer.trajectory(robot)
-        poses[:, 2] = np.unwrap(poses[:, 2])
-        gt_t, gt = data.groundtruth[robot]
-        dr_t, dr = dead_reckoning[robot]
-        dr_at = interpolate_poses(stamps, dr_t, dr)
-        slam_runs.append((stamps, poses, gt_t, gt))
-        dr_runs.append((stamps, dr_at, gt_t, gt))
-        slam_err = localization_errors(*slam_runs[-1], MAX_GROUNDTRUTH_GAP_S)
-        dr_err = localization_errors(*dr_runs[-1], MAX_GROUNDTRUTH_GAP_S)
-        metrics_robots[str(robot)] = {
-            "keyframes": len(stamps),
-            "slam": slam_err,
-            "dead_reckoning": dr_err,
-            "rmse_improvement_factor": dr_err["rmse_m"] / slam_err["rmse_m"],
-        }
-        slam_tracks[robot], dr_tracks[robot], truth_tracks[robot] = poses, dr, gt
-        write_tum(out_dir / f"robot{robot}_slam.tum", stamps, poses)
-        write_tum(out_dir / f"robot{robot}_dead_reckoning.tum", dr_t, dr)
-        write_tum(out_dir / f"robot{robot}_groundtruth.tum", gt_t, gt)
-
+    labels = _association_labels(replayed, data)
+    scores = _score_robots(localizer, data, starts, out_dir)
     landmarks = localizer.landmarks()
-    truth_arr, est_arr = np.array(truth_labels), np.array(est_labels)
-    landmark_errors = {}
-    for subject, position in sorted(data.landmark_truth.items()):
-        mine = est_arr[truth_arr == subject]
-        if len(mine):
-            best = int(np.bincount(mine).argmax())
-            landmark_errors[str(subject)] = float(np.linalg.norm(landmarks[best, :2] - position))
-    precision, recall = pairwise_precision_recall(truth_arr, est_arr)
+    landmark_errors = _landmark_errors(landmarks, labels, data)
+    precision, recall = pairwise_precision_recall(labels.truth, labels.estimated)
     errors = np.array(list(landmark_errors.values()))
     association = diagnostics["landmark_association"]
     metrics = {
@@ -204,10 +244,10 @@ def run_mrclam(
         "known_association": known_association,
         "inter_robot": inter_robot,
         "max_time_s": max_time_s,
-        "robots": metrics_robots,
+        "robots": scores.per_robot,
         "overall": {
-            "slam": pooled_localization_errors(slam_runs, MAX_GROUNDTRUTH_GAP_S),
-            "dead_reckoning": pooled_localization_errors(dr_runs, MAX_GROUNDTRUTH_GAP_S),
+            "slam": pooled_localization_errors(scores.slam_runs, MAX_GROUNDTRUTH_GAP_S),
+            "dead_reckoning": pooled_localization_errors(scores.dr_runs, MAX_GROUNDTRUTH_GAP_S),
         },
         "landmarks": {
             "estimated": len(landmarks),
@@ -218,9 +258,9 @@ def run_mrclam(
         "association": {
             "pairwise_precision": precision,
             "pairwise_recall": recall,
-            "points_associated": len(truth_labels),
-            "points_dropped_ambiguous": dropped,
-            "points_tentative": tentative,
+            "points_associated": len(labels.truth),
+            "points_dropped_ambiguous": labels.dropped,
+            "points_tentative": labels.tentative,
             "landmarks_tentative_expired": association["tentatives_expired"],
             "geometric_ceiling": geometric_association_ceiling(data, algorithms.localizer),
         },
@@ -237,9 +277,9 @@ def run_mrclam(
     mode = "known association" if known_association else "PDA"
     plot_slam_run(
         out_dir / "trajectories.png",
-        truth_tracks,
-        slam_tracks,
-        dr_tracks,
+        scores.truth_tracks,
+        scores.slam_tracks,
+        scores.dr_tracks,
         truth_lm,
         landmarks,
         f"MRCLAM SLAM ({mode})",

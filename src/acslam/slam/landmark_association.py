@@ -9,6 +9,7 @@ graph until then.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -47,6 +48,7 @@ class _Tentative:
     observations: list[tuple[int, np.ndarray, np.ndarray]]  # (pose key, z_kf, cov_kf)
     kf_index: int
     stamp: float
+    descriptor: np.ndarray | None = None
 
 
 @dataclass
@@ -56,6 +58,7 @@ class _Frame:
     marginal (``cov``)."""
 
     pose_key: int
+    descriptors: np.ndarray | None = None
     kf: list[np.ndarray] = field(default_factory=list)
     cov_kf: list[np.ndarray] = field(default_factory=list)
     world: list[np.ndarray] = field(default_factory=list)
@@ -90,6 +93,45 @@ def to_keyframe(
     return point_kf, cov_kf
 
 
+def hamming_bits(a: np.ndarray, b: np.ndarray) -> int:
+    """Bits in which two binary descriptors (uint8 rows) differ. A point may be a
+    landmark only if both look alike, when both carry descriptors."""
+    return int(np.unpackbits(np.bitwise_xor(a, b)).sum())
+
+
+def alike(
+    config: SlamConfig,
+    frame: _Frame,
+    n: int,
+    candidates: Sequence[int],
+    descriptors: dict[int, np.ndarray | None],
+) -> list[int]:
+    """The candidates point ``n`` of ``frame`` may be by its descriptor: those without one,
+    and of those with one, the ones within the Hamming gate and within the margin of the
+    best (a ratio test: a descriptor much closer than the rest decides)."""
+    if frame.descriptors is None:
+        return [int(i) for i in candidates]
+    bits = {
+        int(i): hamming_bits(frame.descriptors[n], descriptors[int(i)])
+        for i in candidates
+        if descriptors.get(int(i)) is not None
+    }
+    limit = config.association_max_descriptor_bits
+    if bits:
+        limit = min(limit, min(bits.values()) + config.association_descriptor_margin_bits)
+    return [int(i) for i in candidates if bits.get(int(i), -1) <= limit]
+
+
+def gate_radius(config: SlamConfig, point_cov: np.ndarray) -> float:
+    """Euclidean pre-gate of a point: ``association_gate_m``, widened to the Mahalanobis
+    gate of the point's own world covariance (pose marginal included) so that a robot
+    whose estimate drifted further than the fixed gate can still find its landmarks."""
+    widest = float(np.linalg.eigvalsh(point_cov)[-1])
+    return max(
+        config.association_gate_m, float(np.sqrt(config.association_mahalanobis_gate * widest))
+    )
+
+
 def chain_variance(robot: _Robot, since: int, now: int, lever_sq: float) -> float:
     """Planar position variance the odometry chain from keyframe ``since`` to ``now`` adds
     to a point seen at squared range ``lever_sq`` (heading error x lever arm)."""
@@ -106,6 +148,7 @@ class LandmarkAssociation:
         self.backend = backend
         self.config = backend.config
         self._known_landmarks: dict[int, int] = {}
+        self._descriptors: dict[int, np.ndarray] = {}  # landmark -> its first descriptor
         self._tentatives: list[_Tentative] = []
         self.robot_observations = 0
         self.dropped_ambiguous = 0
@@ -129,7 +172,8 @@ class LandmarkAssociation:
         results = [AssociationResult(-1, False, {}) for _ in points]
         if not finite.any():
             return results
-        frame = self._frame(robot, points[finite])
+        descriptors = None if msg.descriptors is None else msg.descriptors[finite]
+        frame = self._frame(robot, points[finite], descriptors)
         if msg.ids is not None:
             used = self._add_known(frame, [int(k) for k in msg.ids[finite]])
         else:
@@ -138,14 +182,14 @@ class LandmarkAssociation:
             results[i] = result
         return results
 
-    def _frame(self, robot: _Robot, points: np.ndarray) -> _Frame:
+    def _frame(self, robot: _Robot, points: np.ndarray, descriptors: np.ndarray | None) -> _Frame:
         backend = self.backend
         pose_key = robot.pose_keys[-1]
         pose = backend.pose_estimate(pose_key)
         rotation = pose.rotation().matrix()
         pose_cov = backend.pose_covariance(robot)
         offset_cov = backend.offset_covariance(robot)
-        frame = _Frame(pose_key)
+        frame = _Frame(pose_key, descriptors)
         for point in points:
             point_kf, cov_kf = to_keyframe(self.config, robot, point, offset_cov)
             frame.kf.append(point_kf)
@@ -160,13 +204,19 @@ class LandmarkAssociation:
         factor = observation_factor(pose_key, keys.landmark_key(index), point_kf, noise)
         self.backend.add_factor(factor)
 
+    def _new_landmark(self, frame: _Frame, n: int) -> int:
+        index = self.backend.new_landmark(frame.world[n], frame.cov[n])
+        if frame.descriptors is not None:
+            self._descriptors[index] = frame.descriptors[n]
+        return index
+
     def _add_known(self, frame: _Frame, known_ids: list[int]) -> list[AssociationResult]:
         results = []
         for n, known in enumerate(known_ids):
             index = self._known_landmarks.get(int(known))
             is_new = index is None
             if is_new:
-                index = self.backend.new_landmark(frame.world[n], frame.cov[n])
+                index = self._new_landmark(frame, n)
                 self._known_landmarks[int(known)] = index
             self._add_factor(frame.pose_key, index, frame.kf[n], frame.cov_kf[n], 1.0)
             results.append(AssociationResult(index, is_new, {index: 1.0}))
@@ -200,7 +250,8 @@ class LandmarkAssociation:
                 result = AssociationResult(-1, True, {}, tentative=True)
             results.append(result)
         for n in new_points:
-            tentative = _Tentative(robot.robot_id, [], len(robot.pose_keys) - 1, stamp)
+            descriptor = None if frame.descriptors is None else frame.descriptors[n]
+            tentative = _Tentative(robot.robot_id, [], len(robot.pose_keys) - 1, stamp, descriptor)
             self._tentatives.append(tentative)
             results[n] = self._observe_tentative(robot, stamp, tentative, frame, n)
         return results
@@ -210,7 +261,7 @@ class LandmarkAssociation:
         world = np.array(frame.world)
         positions = backend.landmark_positions
         per_point = [
-            euclidean_gate(p, positions, self._gate_radius(cov))
+            euclidean_gate(p, positions, gate_radius(self.config, cov))
             for p, cov in zip(world, frame.cov, strict=True)
         ]
         confirmed = sorted({int(i) for g in per_point for i in g})
@@ -235,7 +286,7 @@ class LandmarkAssociation:
             tent_geometry.append((np.asarray(pose.transformFrom(z_kf)), rot @ cov_kf @ rot.T))
         for n in range(len(world)):
             lever = pose_lever_jacobian(ref_rot, np.asarray(ref_pose.transformTo(world[n])))
-            for i in per_point[n]:
+            for i in alike(self.config, frame, n, per_point[n], self._descriptors):
                 c = col_of[int(i)]
                 s = innovation_covariance(lever, ref_cov, lm_covs[c], cross[c], frame.sensor[n])
                 self._score(scores, n, c, world[n] - positions[i], s)
@@ -243,6 +294,8 @@ class LandmarkAssociation:
             for k, (position, cov) in enumerate(tent_geometry):
                 innovation = world[n] - position
                 if np.linalg.norm(innovation) > self.config.association_gate_m:
+                    continue
+                if not alike(self.config, frame, n, [0], {0: tentatives[k].descriptor}):
                     continue
                 chain = chain_variance(robot, tentatives[k].kf_index, now_index, rho2)
                 s = frame.sensor[n] + cov + np.diag([chain, chain, 0.0])
@@ -300,16 +353,6 @@ class LandmarkAssociation:
             self._add_factor(frame.pose_key, index, frame.kf[n], frame.cov_kf[n], probability)
         return AssociationResult(confirmed[column], False, soft)
 
-    def _gate_radius(self, point_cov: np.ndarray) -> float:
-        """Euclidean pre-gate of a point: ``association_gate_m``, widened to the Mahalanobis
-        gate of the point's own world covariance (pose marginal included) so that a robot
-        whose estimate drifted further than the fixed gate can still find its landmarks."""
-        widest = float(np.linalg.eigvalsh(point_cov)[-1])
-        return max(
-            self.config.association_gate_m,
-            float(np.sqrt(self.config.association_mahalanobis_gate * widest)),
-        )
-
     @staticmethod
     def _score(scores: _Scores, n: int, c: int, innovation: np.ndarray, s: np.ndarray) -> None:
         scores.d2[n, c] = mahalanobis_sq(innovation, s)
@@ -329,7 +372,7 @@ class LandmarkAssociation:
             self.tentative_observations += 1
             return AssociationResult(-1, True, {}, tentative=True)
         self._tentatives.remove(tentative)
-        index = self.backend.new_landmark(frame.world[n], frame.cov[n])
+        index = self._new_landmark(frame, n)
         for pose_key, z_kf, cov_kf in tentative.observations:
             self._add_factor(pose_key, index, z_kf, cov_kf, 1.0)
         return AssociationResult(index, True, {index: 1.0})

@@ -10,7 +10,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from acslam.features import CameraIntrinsics, back_project, extract_features, match
+from acslam.sources.orb import CameraIntrinsics, back_project, extract_features, match
 
 # TUM Freiburg-1 calibration (PROVENANCE.md; the frames are fr1/xyz), depth raw / 5000 = m.
 FR1 = CameraIntrinsics(fx=517.3, fy=516.5, cx=318.6, cy=255.3, depth_scale=5000.0)

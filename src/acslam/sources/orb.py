@@ -1,17 +1,37 @@
-"""ORB landmarks from RGB + registered depth (thesis §4.3, eqs. 4.1-4.2).
+"""ORB landmarks from RGB + registered depth (thesis §4.3, eqs. 4.1-4.2): the camera
+front end that turns RGB-D frames into :class:`~acslam.messages.LandmarkObservations`.
 
 Keypoints come from OpenCV's ORB on the grey image; each keypoint's depth (metres =
 raw / ``depth_scale``) back-projects it with the pinhole model of eq. 4.1. Keypoints
 outside the depth range (eq. 4.2), without depth (raw 0), or within ``border_px`` of the
-image edge are dropped. Points are in the camera frame (x right, y down, z forward).
+image edge are dropped. Points come out in the camera's optical frame (x right, y down,
+z forward) and go to the robot frame (x forward, y left, z up) through the camera mount.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+
+from acslam.messages import LandmarkObservations
+
+OPTICAL_TO_ROBOT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+"""Rotation of a camera mounted looking forward: optical z forward is robot x, optical
+x right is robot -y, optical y down is robot -z."""
+
+
+@dataclass(frozen=True)
+class CameraMount:
+    """Where the camera sits on the robot: rotation and translation (m) from its optical
+    frame to the robot frame."""
+
+    rotation: np.ndarray = field(default_factory=lambda: OPTICAL_TO_ROBOT.copy())
+    translation_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def to_robot(self, points_optical: np.ndarray) -> np.ndarray:
+        return np.asarray(points_optical) @ self.rotation.T + self.translation_m
 
 
 @dataclass(frozen=True)
@@ -91,3 +111,14 @@ def match(first: Features, second: Features, ratio: float = 0.75) -> np.ndarray:
         if best.distance < ratio * second_best.distance
     ]
     return np.array(pairs, dtype=int).reshape(-1, 2)
+
+
+def landmark_observations(
+    features: Features, robot_id: int, stamp: float, mount: CameraMount | None = None
+) -> LandmarkObservations:
+    """The frame's features as the robot's landmark message: points in the robot frame,
+    descriptors kept for the association."""
+    mount = mount or CameraMount()
+    return LandmarkObservations(
+        robot_id, stamp, mount.to_robot(features.points), descriptors=features.descriptors
+    )
