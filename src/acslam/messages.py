@@ -59,10 +59,11 @@ class OdometryIncrement:
 class LidarScan:
     """One 2D LiDAR sweep in the robot frame.
 
-    ``angles`` (rad) and ``ranges`` (m) have shape (N,). A beam with no return within
-    ``range_max_m`` has range ``inf`` (free as far as the sensor reaches); a range of 0
-    is an invalid reading (e.g. an object closer than the sensor's minimum range), which
-    says nothing about the space along the beam. NaN and negative ranges are rejected.
+    ``angles`` (rad) and ``ranges`` (m) have shape (N,) and are read-only. A beam with
+    no return within ``range_max_m`` has range ``inf`` (free as far as the sensor
+    reaches); a range of 0 is an invalid reading (e.g. an object closer than the sensor's
+    minimum range), which says nothing about the space along the beam. NaN and negative
+    ranges are rejected.
     """
 
     robot_id: int
@@ -82,8 +83,12 @@ class LidarScan:
             raise MessageError("LidarScan.ranges: must be >= 0 or +inf (no return), never NaN")
         if not (math.isfinite(self.range_max_m) and self.range_max_m > 0):
             raise MessageError("LidarScan.range_max_m: must be finite and > 0")
-        object.__setattr__(self, "angles", angles)
-        object.__setattr__(self, "ranges", ranges)
+        # The message owns read-only copies: the localizer's scan store and the map
+        # share them instead of copying each scan again.
+        for name, values in (("angles", angles), ("ranges", ranges)):
+            owned = np.array(values)
+            owned.flags.writeable = False
+            object.__setattr__(self, name, owned)
 
 
 @dataclass(frozen=True)

@@ -458,8 +458,8 @@ class TeamMap:
             raise KeyError(f"scan {scan_key!r} was already added")
         scan = _PosedScan(
             int(robot_id),
-            np.array(ranges, dtype=np.float64),
-            np.array(angles, dtype=np.float64),
+            np.asarray(ranges, dtype=np.float64),  # shared, not copied: messages are read-only
+            np.asarray(angles, dtype=np.float64),
             np.array(pose, dtype=np.float64).reshape(3),
             float(range_max_m),
         )

@@ -68,7 +68,8 @@ class Localizer(Protocol):
         ...
 
     def match_scan(self, index: int, scan: LidarScan) -> None:
-        """Constrain the kept scan ``index`` by matching ``scan`` (its mappable beams)."""
+        """Keep ``scan`` (the mappable beams) as scan ``index`` and constrain it by
+        matching."""
         ...
 
     def optimize(self, close_loops: bool) -> None:
@@ -120,7 +121,10 @@ class Mapper(Protocol):
         ranges_m: np.ndarray,
         angles_rad: np.ndarray,
         pose: np.ndarray,
-    ) -> None: ...
+        range_max_m: float,
+    ) -> None:
+        """A scan at its sensor ``pose``; returns beyond ``range_max_m`` are no returns."""
+        ...
 
     def move_scan(self, index: int, pose: np.ndarray) -> None: ...
 

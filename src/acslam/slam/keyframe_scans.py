@@ -45,6 +45,12 @@ class KeyframeScans:
         self._by_keyframe.setdefault(keyframe, []).append(index)
         return index
 
+    def replace(self, index: int, scan: LidarScan) -> None:
+        """Keep ``scan`` (the same sweep with fewer beams, e.g. those fit for mapping) as
+        scan ``index``: what :meth:`posed` returns is then what the map holds."""
+        _, keyframe, offset = self._scans[index]
+        self._scans[index] = (scan, keyframe, offset)
+
     def pose(self, index: int) -> np.ndarray:
         """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
         _, key, offset = self._scans[index]

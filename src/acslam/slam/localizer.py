@@ -51,6 +51,7 @@ class Isam2Localizer:
         return self.backend.add_scan(message)
 
     def match_scan(self, index: int, scan: LidarScan) -> None:
+        self.backend.scans.replace(index, scan)
         self.scan_matcher.add_scan(self.backend, index, scan)
 
     def optimize(self, close_loops: bool) -> None:

@@ -1,0 +1,30 @@
+"""Perception: beams that end on a teammate are dropped once, and the localizer's scan
+store keeps exactly what the map gets."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from acslam.config import ScanMatchingConfig, SlamConfig
+from acslam.messages import LidarScan
+from acslam.pipeline.perception import Perception
+from acslam.slam.localizer import Isam2Localizer
+
+
+def test_beams_on_a_teammate_are_dropped_and_the_store_keeps_the_mappable_scan() -> None:
+    # Robot 0 at the origin looks along +x; robot 1 stands 2 m ahead of it.
+    starts = {0: np.zeros(3), 1: np.array([2.0, 0.0, np.pi])}
+    localizer = Isam2Localizer(SlamConfig(), scan_matching=ScanMatchingConfig(), starts=starts)
+    perception = Perception(localizer, starts, robot_reach_m=0.25)
+    angles = np.linspace(-0.5, 0.5, 11)  # 0.1 rad apart: the centre beam ends on robot 1
+    ranges = np.full(11, 4.0)
+    ranges[5] = 1.9  # 0.1 m short of robot 1's centre: within its reach
+    ranges[0] = 0.0  # an invalid reading
+    scan = LidarScan(0, 0.0, angles, ranges, 8.0)
+    (kept,) = perception.localize([scan], close_loops=False).scans
+    assert kept.received is scan
+    assert len(kept.mappable.ranges) == 9
+    assert not np.isin(kept.mappable.ranges, [0.0, 1.9]).any()
+    ((stored, pose),) = localizer.backend.scans.posed()
+    assert stored is kept.mappable
+    np.testing.assert_allclose(pose, [0.0, 0.0, 0.0])
