@@ -185,7 +185,9 @@ class Server:
         for kept in scans:
             pose = self._localizer.scan_pose(kept.index)
             scan = kept.mappable
-            self._mapper.add_scan(scan.robot_id, kept.index, scan.ranges, scan.angles, pose)
+            self._mapper.add_scan(
+                scan.robot_id, kept.index, scan.ranges, scan.angles, pose, scan.range_max_m
+            )
             self._new_scan_cells.append(self._map_spec.world_to_cell(pose[:2])[0])
         moved = self._localizer.moved_scans()
         if moved:

@@ -104,7 +104,7 @@ def _build_map(
     spec = _map_spec(scans, poses, algorithms.mapper)
     mapper = MAPPERS.create(algorithms.mapper, spec=spec)
     for index, (scan, pose) in enumerate(zip(scans, poses, strict=True)):
-        mapper.add_scan(scan.robot_id, index, scan.ranges, scan.angles, pose)
+        mapper.add_scan(scan.robot_id, index, scan.ranges, scan.angles, pose, scan.range_max_m)
     return mapper.occupancy_values(), spec
 
 
