@@ -27,11 +27,11 @@ import numpy as np
 
 from acslam.config import PlanningConfig, PositiveFloat, RobotsConfig, StageParams
 from acslam.exploration.allocation import Allocation
-from acslam.exploration.clustering import FrontierCluster
 from acslam.geometry import wrap_angle
 from acslam.mapping.costmap import Costmap
 from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS
-from acslam.planning.field import DistanceField, RobotState
+from acslam.pipeline.stages import Cells, Clusters, Commands, Goals, Team, Xy
+from acslam.planning.field import DistanceField
 
 
 class NearestParams(StageParams):
@@ -46,11 +46,7 @@ class NearestAllocator:
         self.params = params
 
     def allocate(
-        self,
-        robot_cells: np.ndarray,
-        clusters: Sequence[FrontierCluster],
-        costmap: Costmap,
-        current: Sequence[int | None] | None = None,
+        self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
     ) -> Allocation:
         robots_m = costmap.spec.cell_to_world(np.asarray(robot_cells).reshape(-1, 2))
         if not clusters:
@@ -77,12 +73,7 @@ class PurePursuitPlanner:
         self.params = params
         self.robots = robots
 
-    def plan(
-        self,
-        states: Sequence[RobotState],
-        goals_xy_m: Sequence[np.ndarray],
-        field: DistanceField,
-    ) -> list[tuple[float, float]]:
+    def plan(self, states: Team, goals_xy_m: Sequence[Xy], field: DistanceField) -> Commands:
         commands = []
         for state, goal in zip(states, goals_xy_m, strict=True):
             to_goal = np.asarray(goal) - state.xy_m

@@ -45,6 +45,29 @@ seed_option = click.option(
 )
 
 
+def out_option(help_text: str, required: bool = False) -> Callable:
+    """--out DIR, the folder a command writes."""
+    return click.option(
+        "--out",
+        "out_dir",
+        type=click.Path(file_okay=False, path_type=Path),
+        required=required,
+        default=None,
+        help=help_text,
+    )
+
+
+def max_time_option(help_text: str) -> Callable:
+    """--max-time SECONDS; what the seconds are (simulated, wall, log) is the help's."""
+    return click.option(
+        "--max-time",
+        "max_time_s",
+        type=click.FloatRange(min=0, min_open=True),
+        default=None,
+        help=help_text,
+    )
+
+
 def fault_options(command: Callable) -> Callable:
     """--drop-rate and --latency-ms: faults a robot agent injects into its sensor messages."""
     command = click.option(
@@ -92,13 +115,7 @@ def scenarios_command() -> None:
 @scenario_option
 @robots_option
 @seed_option
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="Folder for map.yaml, map.pgm (ROS map_server format) and map.png.",
-)
+@out_option("Folder for map.yaml, map.pgm (ROS map_server format) and map.png.", required=True)
 def map_command(scenario_name: str, robots: int | None, seed: int | None, out_dir: Path) -> None:
     """Build a scenario's ground-truth world and write it as a map."""
     from acslam.eval.figures import plot_world
@@ -133,20 +150,8 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     default=None,
     help="Frontier allocator [default: the scenario's algorithms.allocator, factor-graph].",
 )
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Run folder [default: runs/<scenario>-<time>].",
-)
-@click.option(
-    "--max-time",
-    "max_time_s",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Simulated seconds before the run stops [default: the scenario's sim.max_time_s].",
-)
+@out_option("Run folder [default: runs/<scenario>-<time>].")
+@max_time_option("Simulated seconds before the run stops [default: the scenario's sim.max_time_s].")
 @click.option(
     "--distributed",
     is_flag=True,
@@ -229,8 +234,9 @@ def run_command(
 
                 options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
                 metrics = run_distributed(
-                    scenario, scenario_name, out_dir, limit_s, options, show, on_step
-                )
+                    scenario, scenario_name, out_dir, limit_s,
+                    robot_options=options, on_progress=show, on_step=on_step,
+                )  # fmt: skip
             else:
                 metrics = run_exploration(
                     scenario, out_dir, limit_s, on_progress=show, on_step=on_step
@@ -324,25 +330,13 @@ def _algorithms(path: Path | None):
 
 @slam_group.command("mrclam")
 @click.argument("path", type=click.Path(file_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="Folder for metrics.json, TUM trajectories and trajectories.png.",
-)
+@out_option("Folder for metrics.json, TUM trajectories and trajectories.png.", required=True)
 @click.option(
     "--known-association",
     is_flag=True,
     help="Reference mode: use the barcodes as landmark identities instead of PDA.",
 )
-@click.option(
-    "--max-time",
-    "max_time_s",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Use only the first SECONDS of the recording [default: all of it].",
-)
+@max_time_option("Use only the first SECONDS of the recording [default: all of it].")
 @click.option(
     "--inter-robot/--no-inter-robot",
     default=True,
@@ -384,12 +378,9 @@ def slam_mrclam_command(
 
 @slam_group.command("carmen")
 @click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
+@out_option(
+    "Folder for trajectory.tum, map.yaml/.pgm/.png, odometry_vs_slam.png, metrics.json.",
     required=True,
-    help="Folder for trajectory.tum, map.yaml/.pgm/.png, odometry_vs_slam.png, metrics.json.",
 )
 @algorithms_option("carmen")
 def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) -> None:
@@ -400,7 +391,7 @@ def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) 
     """
     from acslam.replay.carmen import run_carmen
 
-    metrics = run_carmen(log, out_dir, _algorithms(algorithms_file))
+    metrics = run_carmen(log, out_dir, algorithms=_algorithms(algorithms_file))
     skipped = metrics["skipped_lines"]["count"]
     click.echo(
         f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "
@@ -418,12 +409,8 @@ def experiments_group() -> None:
 
 def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
     """--out, --workers, --executor and --max-time, shared by the experiments commands."""
-    function = click.option(
-        "--max-time",
-        "max_time_s",
-        type=click.FloatRange(min=0, min_open=True),
-        default=None,
-        help="Simulated seconds per run [default: the grid's, else the scenario's].",
+    function = max_time_option(
+        "Simulated seconds per run [default: the grid's, else the scenario's]."
     )(function)
     function = click.option(
         "--ray-address",
@@ -445,12 +432,8 @@ def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
         show_default=True,
         help="Runs in parallel, one process each.",
     )(function)
-    return click.option(
-        "--out",
-        "out_dir",
-        type=click.Path(file_okay=False, path_type=Path),
-        required=True,
-        help="Sweep folder: runs/<run-id>/ per run, summary.md and summary.html.",
+    return out_option(
+        "Sweep folder: runs/<run-id>/ per run, summary.md and summary.html.", required=True
     )(function)
 
 
@@ -537,19 +520,9 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     required=True,
     help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (tcp/127.0.0.1:PORT locally).",
 )
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Run folder [default: runs/<scenario>-<time>-serve].",
-)
-@click.option(
-    "--max-time",
-    "max_time_s",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Wall-clock seconds before the run stops [default: the scenario's sim.max_time_s].",
+@out_option("Run folder [default: runs/<scenario>-<time>-serve].")
+@max_time_option(
+    "Wall-clock seconds before the run stops [default: the scenario's sim.max_time_s]."
 )
 @click.option(
     "--heartbeat-timeout",
@@ -579,7 +552,7 @@ def serve_command(
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
     options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
     click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
-    metrics = serve(scenario, listen, out_dir, limit_s, options)
+    metrics = serve(scenario, listen, out_dir, limit_s, options=options)
     _print_summary(metrics, scenario.reachable_area_m2)
 
 
@@ -591,13 +564,7 @@ def serve_command(
 @click.option(
     "--connect", required=True, help="The server's Zenoh endpoint, e.g. tcp/10.0.0.5:7447."
 )
-@click.option(
-    "--max-time",
-    "max_time_s",
-    type=click.FloatRange(min=0, min_open=True),
-    default=None,
-    help="Seconds before the robot stops [default: the scenario's sim.max_time_s].",
-)
+@max_time_option("Seconds before the robot stops [default: the scenario's sim.max_time_s].")
 @fault_options
 @click.option(
     "--command-timeout",

@@ -63,6 +63,7 @@ def run_loop(
     server: Server,
     source: DataSource,
     log: RunLog,
+    *,
     max_time_s: float,
     out_dir: Path,
     on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
@@ -115,9 +116,13 @@ def run_exploration(
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
     log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
     source = SimulatedSource(sim, substeps)
-    reason, wall_time_s = run_loop(server, source, log, max_time_s, out_dir, on_step)
+    reason, wall_time_s = run_loop(
+        server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=on_step
+    )
     truth = TruthLog.of_simulator(sim)
-    return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, sim.time_s)
+    return finish_run(
+        out_dir, scenario, log, truth, reason=reason, wall_time_s=wall_time_s, time_s=sim.time_s
+    )
 
 
 def failure_reason(exc: Exception, out_dir: Path) -> str:
@@ -175,6 +180,7 @@ def finish_run(
     scenario: Scenario,
     log: RunLog,
     truth: TruthLog,
+    *,
     reason: str,
     wall_time_s: float,
     time_s: float,

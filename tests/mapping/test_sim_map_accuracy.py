@@ -61,7 +61,7 @@ def _waypoints(scenario: Scenario, goals: list[tuple[float, float]], start: np.n
     for goal in goals:
         path = plan_path(
             costmap.cost, costmap.lethal, world.spec, here, np.array(goal),
-            astar.cost_weight, astar.max_snap_m, False,
+            cost_weight=astar.cost_weight, max_snap_m=astar.max_snap_m, shortcut=False,
         )  # fmt: skip
         points.extend(path.points_m[1:])
         here = path.points_m[-1]

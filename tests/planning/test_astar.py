@@ -107,9 +107,9 @@ def test_walled_off_goal_raises_a_named_error() -> None:
             grid,
             np.array([0.15, 0.15]),
             np.array([1.05, 1.05]),
-            WEIGHT,
-            0.0,
-            False,
+            cost_weight=WEIGHT,
+            max_snap_m=0.0,
+            shortcut=False,
         )
     assert isinstance(info.value, AcslamError)
 
@@ -119,15 +119,12 @@ def test_start_and_goal_snap_to_the_nearest_free_cell_within_the_radius() -> Non
     lethal[5:10, 5:10] = True
     grid = GridSpec(0.0, 0.0, RES_M, 20, 20)
     start = grid.cell_to_world([[6, 5]])[0]  # one cell inside the blob's left edge
-    path = plan_path(
-        np.zeros((20, 20)), lethal, grid, start, np.array([1.85, 1.85]), WEIGHT, 0.15, False
-    )
+    snap = {"cost_weight": WEIGHT, "max_snap_m": 0.15, "shortcut": False}
+    path = plan_path(np.zeros((20, 20)), lethal, grid, start, np.array([1.85, 1.85]), **snap)
     assert tuple(path.cells[0]) == (6, 4)
     deep = grid.cell_to_world([[7, 7]])[0]  # 3 cells from free space
     with pytest.raises(NoPathError, match="no free cell within 1 cells"):
-        plan_path(
-            np.zeros((20, 20)), lethal, grid, deep, np.array([1.85, 1.85]), WEIGHT, 0.15, False
-        )
+        plan_path(np.zeros((20, 20)), lethal, grid, deep, np.array([1.85, 1.85]), **snap)
 
 
 def crosses_lethal(points: np.ndarray, lethal: np.ndarray) -> bool:

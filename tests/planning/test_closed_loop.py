@@ -121,9 +121,9 @@ def drive(
                 spec,
                 xy_m,
                 goals_m[r],
-                ASTAR.cost_weight,
-                ASTAR.max_snap_m,
-                ASTAR.shortcut,
+                cost_weight=ASTAR.cost_weight,
+                max_snap_m=ASTAR.max_snap_m,
+                shortcut=ASTAR.shortcut,
             )
         except NoPathError:
             return  # keep the previous path

@@ -174,7 +174,16 @@ def test_single_robot_goes_around_an_obstacle_hugged_by_the_global_path() -> Non
     lethal = distance < ROBOTS.radius_m + 0.02
     start, goal = np.array([-2.0, 0.0]), np.array([2.0, 0.0])
     # Cost weight 0: the shortest path grazes the lethal band, the FGP must keep clear.
-    path = plan_path(np.zeros(grid.shape), lethal, grid, start, goal, 0.0, 0.2, True)
+    path = plan_path(
+        np.zeros(grid.shape),
+        lethal,
+        grid,
+        start,
+        goal,
+        cost_weight=0.0,
+        max_snap_m=0.2,
+        shortcut=True,
+    )
     assert float(field.value(path.points_m).min()) < 0.2
     history = drive(new_planner(), [(-2.0, 0.0, 0.0)], [path.points_m], field, 30.0)
     clearance = np.linalg.norm(history[:, 0, :2], axis=1) - 0.3

@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from acslam.distributed.robot_node import RobotOptions
-from acslam.distributed.server_node import ServeOptions, serve
+from acslam.distributed.server_node import serve
 from acslam.messages import RobotMessage
 from acslam.pipeline.snapshot import Snapshot
 from acslam.scenario import Scenario
@@ -74,6 +74,7 @@ def run_distributed(
     scenario_arg: str,
     out_dir: Path,
     max_time_s: float,
+    *,
     robot_options: RobotOptions | None = None,
     on_progress: Callable[[Snapshot, float, float], None] | None = None,
     on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
@@ -98,7 +99,9 @@ def run_distributed(
             )
             with (out_dir / "logs" / f"robot_{i}.log").open("w") as log:
                 processes.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT))
-        return serve(scenario, endpoint, out_dir, max_time_s, ServeOptions(), on_progress, on_step)
+        return serve(
+            scenario, endpoint, out_dir, max_time_s, on_progress=on_progress, on_step=on_step
+        )
     except BaseException:  # the server failed or was interrupted: the robots go with it
         for process in processes:
             process.kill()

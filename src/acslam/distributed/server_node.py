@@ -57,6 +57,7 @@ def serve(
     listen: str,
     out_dir: Path,
     max_time_s: float,
+    *,
     options: ServeOptions | None = None,
     on_progress: Callable[[Snapshot, float, float], None] | None = None,
     on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
@@ -80,7 +81,9 @@ def serve(
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
         source = ZenohSource(endpoint, period_s, options.heartbeat_timeout_s)
-        reason, wall_time_s = run_loop(server, source, log, max_time_s, out_dir, on_step)
+        reason, wall_time_s = run_loop(
+            server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=on_step
+        )
         now_s = source.time_s
         lost = log.last.lost
         for _ in range(FINAL_STATUS_REPEATS):
@@ -93,7 +96,10 @@ def serve(
                 "transport": endpoint.stats_summary(),
             }
         }
-        return finish_run(out_dir, scenario, log, truth, reason, wall_time_s, now_s, extra)
+        return finish_run(
+            out_dir, scenario, log, truth,
+            reason=reason, wall_time_s=wall_time_s, time_s=now_s, extra=extra,
+        )  # fmt: skip
     finally:
         session.close()
 

@@ -127,18 +127,23 @@ def _save(fig: plt.Figure, path: Path) -> None:
     plt.close(fig)
 
 
-def figure_trajectories(record: RunRecord, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+def _show_grey(ax: plt.Axes, image: np.ndarray, record: RunRecord, alpha: float = 1.0) -> None:
+    """A [0, 1] grey image of the run's grid, in metres, row 0 at the bottom."""
     ax.imshow(
-        ~record.true_occupied,
+        image,
         cmap="gray",
         origin="lower",
         extent=record.spec.extent_m,
         vmin=0,
         vmax=1,
         interpolation="nearest",
-        alpha=0.5,
+        alpha=alpha,
     )
+
+
+def figure_trajectories(record: RunRecord, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+    _show_grey(ax, ~record.true_occupied, record, alpha=0.5)
     for i, (est, true) in enumerate(
         zip(record.estimated_trajectories, record.true_trajectories, strict=True)
     ):
@@ -167,15 +172,7 @@ def figure_trajectories(record: RunRecord, path: Path) -> None:
 
 def figure_map(values: np.ndarray, record: RunRecord, path: Path, title: str) -> None:
     fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
-    ax.imshow(
-        _map_image(values),
-        cmap="gray",
-        origin="lower",
-        extent=record.spec.extent_m,
-        vmin=0,
-        vmax=1,
-        interpolation="nearest",
-    )
+    _show_grey(ax, _map_image(values), record)
     _zoom(ax, record)
     ax.set_title(title)
     _save(fig, path)

@@ -51,6 +51,7 @@ from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.mapping.costmap import Costmap
 from acslam.pipeline.registry import ALLOCATORS
+from acslam.pipeline.stages import Cells, Clusters, Goals
 from acslam.planning.astar import distances_from, snap_to_free
 
 _MIN_LOG_FACTOR = -600.0
@@ -372,6 +373,10 @@ def _unary(
     return unary_log_factors(distances_m, utilities, params.alpha, params.beta)
 
 
+Solution = tuple[str, list[int | None]]
+"""The solver's name and the cluster of each robot (None: idle)."""
+
+
 class _TravelAllocator:
     """The front end every built-in allocator shares: d with commitment, then a solver."""
 
@@ -381,11 +386,7 @@ class _TravelAllocator:
         self.params = params
 
     def allocate(
-        self,
-        robot_cells: np.ndarray,
-        clusters: Sequence[FrontierCluster],
-        costmap: Costmap,
-        current: Sequence[int | None] | None = None,
+        self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
     ) -> Allocation:
         if not clusters:
             robots = len(np.asarray(robot_cells).reshape(-1, 2))
@@ -396,9 +397,7 @@ class _TravelAllocator:
         solver, assignment = self._solve(distances, clusters)
         return Allocation(self.params.name, solver, tuple(assignment), distances)
 
-    def _solve(
-        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
-    ) -> tuple[str, list[int | None]]:
+    def _solve(self, distances_m: np.ndarray, clusters: Clusters) -> Solution:
         raise NotImplementedError
 
 
@@ -408,9 +407,7 @@ class GreedyAllocator(_TravelAllocator):
 
     solver = "greedy"
 
-    def _solve(
-        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
-    ) -> tuple[str, list[int | None]]:
+    def _solve(self, distances_m: np.ndarray, clusters: Clusters) -> Solution:
         return self.solver, _greedy_nearest(distances_m)
 
 
@@ -420,9 +417,7 @@ class HungarianAllocator(_TravelAllocator):
 
     solver = "hungarian"
 
-    def _solve(
-        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
-    ) -> tuple[str, list[int | None]]:
+    def _solve(self, distances_m: np.ndarray, clusters: Clusters) -> Solution:
         return self.solver, _hungarian(_unary(distances_m, clusters, self.params))
 
 
@@ -433,9 +428,7 @@ class FactorGraphAllocator(_TravelAllocator):
 
     solver = "exact"
 
-    def _solve(
-        self, distances_m: np.ndarray, clusters: Sequence[FrontierCluster]
-    ) -> tuple[str, list[int | None]]:
+    def _solve(self, distances_m: np.ndarray, clusters: Clusters) -> Solution:
         params = self.params
         unary = _unary(distances_m, clusters, params)
         active = np.flatnonzero(np.isfinite(unary).any(axis=1))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, TypeAlias, runtime_checkable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -29,6 +29,17 @@ if TYPE_CHECKING:
         RobotSighting,
     )
     from acslam.planning.field import DistanceField, RobotState
+
+
+# Shorthands of the signatures below (for type checkers: they are names, not classes).
+Cells: TypeAlias = "np.ndarray"  # (N, 2) [row, col]
+Grid: TypeAlias = "np.ndarray"  # (rows, cols) per cell
+Xy: TypeAlias = "np.ndarray"  # [x, y] in metres
+Xys: TypeAlias = "np.ndarray"  # (N, 2) [x, y] in metres
+Clusters: TypeAlias = "Sequence[FrontierCluster]"
+Goals: TypeAlias = "Sequence[int | None] | None"  # per robot, the cluster it heads to
+Team: TypeAlias = "Sequence[RobotState]"
+Commands: TypeAlias = "list[tuple[float, float]]"  # (v m/s, omega rad/s) per robot
 
 
 @dataclass(frozen=True)
@@ -176,11 +187,7 @@ class Allocator(Protocol):
     """Which robot explores which cluster. No context."""
 
     def allocate(
-        self,
-        robot_cells: np.ndarray,
-        clusters: Sequence[FrontierCluster],
-        costmap: Costmap,
-        current: Sequence[int | None] | None = None,
+        self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
     ) -> Allocation:
         """``current[i]``: the cluster robot i is heading to, if any."""
         ...
@@ -190,14 +197,7 @@ class Allocator(Protocol):
 class GlobalPlanner(Protocol):
     """A path for one robot on the costmap. No context."""
 
-    def plan(
-        self,
-        cost: np.ndarray,
-        lethal: np.ndarray,
-        spec: GridSpec,
-        start_xy_m: np.ndarray,
-        goal_xy_m: np.ndarray,
-    ) -> np.ndarray:
+    def plan(self, cost: Grid, lethal: Grid, spec: GridSpec, start_xy_m: Xy, goal_xy_m: Xy) -> Xys:
         """(M, 2) waypoints after the start, ending at the goal; raises
         :class:`~acslam.errors.NoPathError` when there is none."""
         ...
@@ -208,12 +208,7 @@ class LocalPlanner(Protocol):
     """Velocity commands for the whole team at once. Context: ``planning``
     (PlanningConfig), ``robots`` (RobotsConfig)."""
 
-    def plan(
-        self,
-        states: Sequence[RobotState],
-        goals_xy_m: Sequence[np.ndarray],
-        field: DistanceField,
-    ) -> list[tuple[float, float]]:
+    def plan(self, states: Team, goals_xy_m: Sequence[Xy], field: DistanceField) -> Commands:
         """``(v, omega)`` per robot toward its lookahead point."""
         ...
 

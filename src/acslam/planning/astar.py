@@ -30,6 +30,7 @@ from acslam.config import NonNegativeFloat, StageParams
 from acslam.errors import NoPathError
 from acslam.grid import NEIGHBOUR_COLS, NEIGHBOUR_ROWS, GridSpec
 from acslam.pipeline.registry import GLOBAL_PLANNERS
+from acslam.pipeline.stages import Grid, Xy, Xys
 
 
 @dataclass(frozen=True)
@@ -328,6 +329,7 @@ def plan_path(
     grid: GridSpec,
     start_xy_m: np.ndarray,
     goal_xy_m: np.ndarray,
+    *,
     cost_weight: float,
     max_snap_m: float,
     shortcut: bool,
@@ -377,18 +379,12 @@ class AstarPlanner:
     def __init__(self, params: AstarParams) -> None:
         self.params = params
 
-    def plan(
-        self,
-        cost: np.ndarray,
-        lethal: np.ndarray,
-        spec: GridSpec,
-        start_xy_m: np.ndarray,
-        goal_xy_m: np.ndarray,
-    ) -> np.ndarray:
+    def plan(self, cost: Grid, lethal: Grid, spec: GridSpec, start_xy_m: Xy, goal_xy_m: Xy) -> Xys:
         p = self.params
         path = plan_path(
-            cost, lethal, spec, start_xy_m, goal_xy_m, p.cost_weight, p.max_snap_m, p.shortcut
-        )
+            cost, lethal, spec, start_xy_m, goal_xy_m,
+            cost_weight=p.cost_weight, max_snap_m=p.max_snap_m, shortcut=p.shortcut,
+        )  # fmt: skip
         return path.points_m
 
 

@@ -29,6 +29,7 @@ from pydantic import Field
 from acslam.config import NonNegativeFloat, PlanningConfig, RobotsConfig, StageParams
 from acslam.geometry import wrap_angles
 from acslam.pipeline.registry import LOCAL_PLANNERS
+from acslam.pipeline.stages import Commands, Team, Xy
 from acslam.planning.field import DistanceField, RobotState
 
 
@@ -81,12 +82,7 @@ class DynamicWindowPlanner:
         self.planning = planning
         self.robots = robots
 
-    def plan(
-        self,
-        states: Sequence[RobotState],
-        goals_xy_m: Sequence[np.ndarray],
-        field: DistanceField,
-    ) -> list[tuple[float, float]]:
+    def plan(self, states: Team, goals_xy_m: Sequence[Xy], field: DistanceField) -> Commands:
         """One command per robot, each chosen with the others as moving obstacles."""
         commands = []
         for k, state in enumerate(states):

@@ -55,6 +55,7 @@ from pydantic import Field
 from acslam.config import NonNegativeFloat, PlanningConfig, PositiveFloat, RobotsConfig, StageParams
 from acslam.geometry import wrap_angle
 from acslam.pipeline.registry import LOCAL_PLANNERS
+from acslam.pipeline.stages import Commands, Team, Xy
 from acslam.planning.field import DistanceField, RobotState
 
 _FREE_VELOCITY_SIGMA_MPS = 10.0
@@ -216,12 +217,7 @@ class FactorGraphPlanner:
         right = np.stack([forward[:, 1], -forward[:, 0]], axis=1)
         guesses[:, 1:, :2] += self.params.keep_right_m * blocked[..., None] * right[:, None]
 
-    def plan(
-        self,
-        states: Sequence[RobotState],
-        goals_xy_m: Sequence[np.ndarray],
-        field: DistanceField,
-    ) -> list[tuple[float, float]]:
+    def plan(self, states: Team, goals_xy_m: Sequence[Xy], field: DistanceField) -> Commands:
         """``(v, omega)`` per robot (:meth:`solve` for the trajectories too)."""
         return self.solve(states, goals_xy_m, field).commands
 

@@ -155,6 +155,7 @@ def _metrics(
 def run_carmen(
     path: str | Path,
     out_dir: str | Path,
+    *,
     algorithms: AlgorithmsConfig | None = None,
     odometry_map: bool = True,
 ) -> dict:

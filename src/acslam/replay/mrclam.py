@@ -211,6 +211,7 @@ def _score_robots(
 def run_mrclam(
     path: str | Path,
     out_dir: str | Path,
+    *,
     known_association: bool = False,
     max_time_s: float | None = None,
     algorithms: AlgorithmsConfig | None = None,
