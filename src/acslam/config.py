@@ -38,6 +38,20 @@ Probability = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
 Pose = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 
 
+def ordered(*pairs: tuple[str, str, bool]) -> Any:
+    """A model validator: each ``(low, high, strict)`` field pair must satisfy low < high
+    (strict) or low <= high."""
+
+    def check(model: BaseModel) -> BaseModel:
+        for low, high, strict in pairs:
+            a, b = getattr(model, low), getattr(model, high)
+            if a > b or (strict and a == b):
+                raise ValueError(f"{low} must {'be below' if strict else 'not exceed'} {high}")
+        return model
+
+    return model_validator(mode="after")(check)
+
+
 class Section(BaseModel):
     """Base of every config section: unknown keys are errors, values are immutable."""
 
@@ -92,11 +106,7 @@ class DungeonWorld(Section):
     door_width_m: PositiveFloat = 0.9
     wall_thickness_m: PositiveFloat = 0.15
 
-    @model_validator(mode="after")
-    def _sizes(self) -> DungeonWorld:
-        if self.room_size_min_m > self.room_size_max_m:
-            raise ValueError("room_size_min_m must not exceed room_size_max_m")
-        return self
+    _sizes = ordered(("room_size_min_m", "room_size_max_m", False))
 
 
 class OsmWorld(Section):
@@ -143,11 +153,7 @@ class LandmarkConfig(Section):
     z_min_m: FiniteFloat = 0.1
     z_max_m: FiniteFloat = 1.0
 
-    @model_validator(mode="after")
-    def _heights(self) -> LandmarkConfig:
-        if self.z_min_m > self.z_max_m:
-            raise ValueError("z_min_m must not exceed z_max_m")
-        return self
+    _heights = ordered(("z_min_m", "z_max_m", False))
 
 
 # --------------------------------------------------------------------------- robots
@@ -202,11 +208,7 @@ class LidarConfig(Section):
     range_noise_rel: NonNegativeFloat = 0.015
     angle_noise_std_rad: NonNegativeFloat = 0.002
 
-    @model_validator(mode="after")
-    def _ranges(self) -> LidarConfig:
-        if self.range_min_m >= self.range_max_m:
-            raise ValueError("range_min_m must be below range_max_m")
-        return self
+    _ranges = ordered(("range_min_m", "range_max_m", True))
 
 
 class CameraConfig(Section):
@@ -218,11 +220,7 @@ class CameraConfig(Section):
     fov_rad: Annotated[float, Field(gt=0, le=2 * math.pi)] = math.radians(70.0)
     noise_std_m: NonNegativeFloat = 0.03
 
-    @model_validator(mode="after")
-    def _ranges(self) -> CameraConfig:
-        if self.range_min_m >= self.range_max_m:
-            raise ValueError("range_min_m must be below range_max_m")
-        return self
+    _ranges = ordered(("range_min_m", "range_max_m", True))
 
 
 class SensorsConfig(Section):
@@ -340,13 +338,9 @@ class MappingConfig(StageParams):
     far_free_margin_m: NonNegativeFloat = 0.25
     kernel_beyond_hit: bool = True
 
-    @model_validator(mode="after")
-    def _bounds(self) -> MappingConfig:
-        if self.log_odds_min >= self.log_odds_max:
-            raise ValueError("log_odds_min must be below log_odds_max")
-        if self.free_probability >= self.occupied_probability:
-            raise ValueError("free_probability must be below occupied_probability")
-        return self
+    _bounds = ordered(
+        ("log_odds_min", "log_odds_max", True), ("free_probability", "occupied_probability", True)
+    )
 
 
 class CostmapConfig(Section):
