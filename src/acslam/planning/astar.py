@@ -1,7 +1,7 @@
 """Global planning on the costmap (thesis §4.7): A*, Dijkstra, smoothing and lookahead.
 
 Graph model (eqs. 4.43-4.45): every non-lethal cell is a node, 8-connected. Entering
-cell ``n'`` costs ``step length (m) * (1 + w * cost[n'])`` with ``w = astar_cost_weight``,
+cell ``n'`` costs ``step length (m) * (1 + w * cost[n'])`` with ``w = AstarParams.cost_weight``,
 so a path's cost is its length in metres inflated by the costmap cost it crosses. A
 diagonal step between two lethal cells (both orthogonal neighbours lethal) is forbidden:
 the robot would squeeze through a wall's corner. Every step costs at least its length, so
