@@ -18,7 +18,6 @@ from rich.console import Console
 from rich.table import Table
 
 from acslam.errors import AcslamError
-from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS
 
 if TYPE_CHECKING:
     from acslam.scenario import Scenario
@@ -43,6 +42,21 @@ robots_option = click.option(
 seed_option = click.option(
     "--seed", type=click.IntRange(min=0), default=None, help="Override the scenario seed."
 )
+
+
+class PluginChoice(click.Choice):
+    """The registered names of a stage kind, looked up when first needed: importing every
+    plugin takes over a second, which ``--help`` or an early error need not pay."""
+
+    def __init__(self, kind: str) -> None:
+        self.kind = kind
+        self.case_sensitive = True
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        from acslam.pipeline.registry import REGISTRIES
+
+        return tuple(REGISTRIES[self.kind].names())
 
 
 def out_option(help_text: str, required: bool = False) -> Callable:
@@ -140,13 +154,13 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
 @seed_option
 @click.option(
     "--planner",
-    type=click.Choice(LOCAL_PLANNERS.names()),
+    type=PluginChoice("local_planner"),
     default=None,
     help="Local planner [default: the scenario's algorithms.local_planner, fgp].",
 )
 @click.option(
     "--allocator",
-    type=click.Choice(ALLOCATORS.names()),
+    type=PluginChoice("allocator"),
     default=None,
     help="Frontier allocator [default: the scenario's algorithms.allocator, factor-graph].",
 )
