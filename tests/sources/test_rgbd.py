@@ -5,7 +5,7 @@ For each fr1/xyz pair with ground truth, two keyframes are joined only by the la
 factors of their descriptor-matched ORB points (each landmark starts where the first
 frame saw it) and a weak motion prior; the optimised relative pose must match the
 ground truth within 2 cm and 1 degree (measured: 4.3 mm / 0.15 deg, 10.9 mm / 0.41 deg,
-10.5 mm / 0.62 deg). The pair of the two ``curr`` frames is left out: their depth images
+10.4 mm / 0.61 deg). The pair of the two ``curr`` frames is left out: their depth images
 are byte-identical although the colour images differ (PROVENANCE.md), so one of them
 belongs to another colour frame.
 """
