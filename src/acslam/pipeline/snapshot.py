@@ -28,10 +28,6 @@ class MapView:
     version: int
     _mapper: Mapper
 
-    def __len__(self) -> int:
-        """Scans in the map."""
-        return len(self._mapper)
-
     def occupancy_values(self) -> np.ndarray:
         """Read-only grid of -1 (unknown), 0 (free), 100 (occupied)."""
         return self._mapper.occupancy_values()
