@@ -20,6 +20,20 @@ NEIGHBOUR_COLS = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 """Row and column offsets of a cell's 8 neighbours, diagonals included."""
 
 
+@numba.njit(cache=True, inline="always")
+def neighbour_flat(flat: int, k: int, rows: int, cols: int) -> int:
+    """Flat index of the ``k``-th 8-neighbour of the flat cell ``flat``; -1 outside the grid.
+
+    Flat kernels (EWFD) walk neighbourhoods through this one helper, in the order of
+    ``NEIGHBOUR_ROWS``/``NEIGHBOUR_COLS``.
+    """
+    row = flat // cols + NEIGHBOUR_ROWS[k]
+    col = flat % cols + NEIGHBOUR_COLS[k]
+    if 0 <= row < rows and 0 <= col < cols:
+        return row * cols + col
+    return -1
+
+
 @dataclass(frozen=True)
 class GridSpec:
     """Placement of a 2D grid in the world frame (units: metres)."""

@@ -52,14 +52,14 @@ its last unknown neighbour.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numba
 import numpy as np
 from scipy import ndimage
 
 from acslam.config import MappingConfig, StageParams
-from acslam.grid import FREE, NEIGHBOUR_COLS, NEIGHBOUR_ROWS, UNKNOWN, GridSpec
+from acslam.grid import FREE, UNKNOWN, GridSpec, neighbour_flat
 from acslam.pipeline.registry import FRONTIER_DETECTORS
 
 _EIGHT = np.ones((3, 3), dtype=bool)
@@ -119,25 +119,50 @@ def _find(parent: np.ndarray, a: int) -> int:
     return root
 
 
+class EwfdArrays(NamedTuple):
+    """The detector's state, one value for the kernels (see the module docstring).
+
+    ``known`` is (rows, cols) int8; ``visited`` and ``dirty_flag`` are flat uint8; the rest
+    are flat int64. ``counters`` = [next component id, frontier count]; ``parent`` and
+    ``piece_active`` are indexed by component id and grow with :meth:`_reserve_ids`.
+    ``changed`` receives the flat cells :func:`_diff` finds; ``queue``, ``mark``,
+    ``dirty`` and ``dirty_flag`` are scratch (``mark``, ``dirty_flag`` and
+    ``piece_active`` are all zero between updates).
+    """
+
+    known: np.ndarray
+    visited: np.ndarray
+    label: np.ndarray
+    parent: np.ndarray
+    piece_active: np.ndarray
+    counters: np.ndarray
+    changed: np.ndarray
+    queue: np.ndarray
+    mark: np.ndarray
+    dirty: np.ndarray
+    dirty_flag: np.ndarray
+    frontier_pos: np.ndarray
+    frontier_list: np.ndarray
+
+
 @numba.njit(cache=True)
 def _diff(
     values: np.ndarray,
-    known: np.ndarray,
     values_words: np.ndarray,
     known_words: np.ndarray,
-    visited: np.ndarray,
     windows: np.ndarray,
-    changed: np.ndarray,
+    ewfd: EwfdArrays,
 ) -> tuple[int, int]:
-    """Copy the changed cells of the windows ``[r0, r1, c0, c1)`` into ``known``.
+    """Copy the changed cells of the windows ``[r0, r1, c0, c1)`` into ``ewfd.known``.
 
-    Returns how many changed cells were written to ``changed`` (flat indices) and how many
+    Returns how many changed cells were written to ``ewfd.changed`` (flat indices) and how many
     of them were visited (bounds the ids the update can create). Overlapping windows are
     compared once: the second sees no difference. ``*_words`` are uint64 views of the rows
     (8 cells a word, when the column count allows; else empty): mostly equal words are
     skipped 8 cells at a time, and a word's extra cells outside the window are real cells,
     so recording their changes too is harmless.
     """
+    known, visited, changed = ewfd.known, ewfd.visited, ewfd.changed
     cols = known.shape[1]
     count = 0
     visited_count = 0
@@ -176,30 +201,21 @@ def _mark_dirty(flat: int, dirty: np.ndarray, dirty_flag: np.ndarray, n_dirty: i
 
 @numba.njit(cache=True)
 def _process(
-    known_2d: np.ndarray,
-    visited: np.ndarray,
-    label: np.ndarray,
-    parent: np.ndarray,
-    piece_active: np.ndarray,
-    state: np.ndarray,
-    changed: np.ndarray,
-    robots: np.ndarray,
-    previous_robots: np.ndarray,
-    queue: np.ndarray,
-    mark: np.ndarray,
-    dirty: np.ndarray,
-    dirty_flag: np.ndarray,
-    frontier_pos: np.ndarray,
-    frontier_list: np.ndarray,
+    ewfd: EwfdArrays, n_changed: int, robots: np.ndarray, previous_robots: np.ndarray
 ) -> None:
-    """Apply the changed cells (already copied into ``known``) to the EWFD state.
+    """Apply the first ``n_changed`` cells of ``ewfd.changed`` (already copied into
+    ``ewfd.known``) to the EWFD state.
 
-    ``state`` = [next component id, frontier count]. ``robots``/``previous_robots`` are
-    flat robot cells (-1: outside the grid). ``mark``, ``dirty_flag`` and
-    ``piece_active`` are scratch arrays that are all zero on entry and on exit.
+    ``robots``/``previous_robots`` are flat robot cells (-1: outside the grid).
     """
-    rows, cols = known_2d.shape
-    known = known_2d.reshape(-1)
+    rows, cols = ewfd.known.shape
+    known = ewfd.known.reshape(-1)
+    visited, label, parent = ewfd.visited, ewfd.label, ewfd.parent
+    piece_active, state = ewfd.piece_active, ewfd.counters
+    changed = ewfd.changed[:n_changed]
+    queue, mark = ewfd.queue, ewfd.mark
+    dirty, dirty_flag = ewfd.dirty, ewfd.dirty_flag
+    frontier_pos, frontier_list = ewfd.frontier_pos, ewfd.frontier_list
     n_dirty = 0
 
     # 1. Visited cells that are no longer free leave the visited set. Every changed cell
@@ -209,13 +225,10 @@ def _process(
     for i in range(changed.shape[0]):
         flat = changed[i]
         n_dirty = _mark_dirty(flat, dirty, dirty_flag, n_dirty)
-        r = flat // cols
-        c = flat - r * cols
         for k in range(8):
-            rr = r + NEIGHBOUR_ROWS[k]
-            cc = c + NEIGHBOUR_COLS[k]
-            if 0 <= rr < rows and 0 <= cc < cols:
-                n_dirty = _mark_dirty(rr * cols + cc, dirty, dirty_flag, n_dirty)
+            v = neighbour_flat(flat, k, rows, cols)
+            if v >= 0:
+                n_dirty = _mark_dirty(v, dirty, dirty_flag, n_dirty)
         if visited[flat] and known[flat] != FREE:
             visited[flat] = 0
             removed[n_removed] = flat
@@ -239,24 +252,19 @@ def _process(
     n_pieces = 0
     tail = 0
     for i in range(n_removed):
-        r = removed[i] // cols
-        c = removed[i] - r * cols
         for k in range(8):
-            rr = r + NEIGHBOUR_ROWS[k]
-            cc = c + NEIGHBOUR_COLS[k]
-            if 0 <= rr < rows and 0 <= cc < cols:
-                v = rr * cols + cc
-                if visited[v] and mark[v] == 0:
-                    n_pieces += 1
-                    lp[n_pieces] = n_pieces
-                    pending[n_pieces] = 1
-                    root = _find(parent, label[v])
-                    origin[n_pieces] = root
-                    piece_active[root] += 1
-                    seed_cells[n_pieces] = v
-                    mark[v] = n_pieces
-                    queue[tail] = v
-                    tail += 1
+            v = neighbour_flat(removed[i], k, rows, cols)
+            if v >= 0 and visited[v] and mark[v] == 0:
+                n_pieces += 1
+                lp[n_pieces] = n_pieces
+                pending[n_pieces] = 1
+                root = _find(parent, label[v])
+                origin[n_pieces] = root
+                piece_active[root] += 1
+                seed_cells[n_pieces] = v
+                mark[v] = n_pieces
+                queue[tail] = v
+                tail += 1
     head = 0
     while head < tail:
         u = queue[head]
@@ -266,15 +274,9 @@ def _process(
         pending[p] -= 1
         if piece_active[o] <= 1:
             continue
-        r = u // cols
-        c = u - r * cols
         for k in range(8):
-            rr = r + NEIGHBOUR_ROWS[k]
-            cc = c + NEIGHBOUR_COLS[k]
-            if not (0 <= rr < rows and 0 <= cc < cols):
-                continue
-            v = rr * cols + cc
-            if not visited[v]:
+            v = neighbour_flat(u, k, rows, cols)
+            if v < 0 or not visited[v]:
                 continue
             m = mark[v]
             if m == 0:
@@ -312,14 +314,11 @@ def _process(
         flat = changed[i]
         if known[flat] != FREE or visited[flat]:
             continue
-        r = flat // cols
-        c = flat - r * cols
         for k in range(8):
-            rr = r + NEIGHBOUR_ROWS[k]
-            cc = c + NEIGHBOUR_COLS[k]
-            if 0 <= rr < rows and 0 <= cc < cols and visited[rr * cols + cc]:
+            v = neighbour_flat(flat, k, rows, cols)
+            if v >= 0 and visited[v]:
                 visited[flat] = 1
-                label[flat] = _find(parent, label[rr * cols + cc])
+                label[flat] = _find(parent, label[v])
                 queue[tail] = flat
                 tail += 1
                 n_dirty = _mark_dirty(flat, dirty, dirty_flag, n_dirty)
@@ -340,15 +339,9 @@ def _process(
         u = queue[head]
         head += 1
         lu = _find(parent, label[u])
-        r = u // cols
-        c = u - r * cols
         for k in range(8):
-            rr = r + NEIGHBOUR_ROWS[k]
-            cc = c + NEIGHBOUR_COLS[k]
-            if not (0 <= rr < rows and 0 <= cc < cols):
-                continue
-            v = rr * cols + cc
-            if known[v] != FREE:
+            v = neighbour_flat(u, k, rows, cols)
+            if v < 0 or known[v] != FREE:
                 continue
             if not visited[v]:
                 visited[v] = 1
@@ -390,14 +383,11 @@ def _process(
             u = queue[head]
             head += 1
             n_dirty = _mark_dirty(u, dirty, dirty_flag, n_dirty)
-            r = u // cols
-            c = u - r * cols
             for k in range(8):
-                rr = r + NEIGHBOUR_ROWS[k]
-                cc = c + NEIGHBOUR_COLS[k]
-                if 0 <= rr < rows and 0 <= cc < cols and visited[rr * cols + cc]:
-                    visited[rr * cols + cc] = 0
-                    queue[tail] = rr * cols + cc
+                v = neighbour_flat(u, k, rows, cols)
+                if v >= 0 and visited[v]:
+                    visited[v] = 0
+                    queue[tail] = v
                     tail += 1
 
     # 5. Frontier status of the cells whose visited state or neighbourhood changed.
@@ -407,12 +397,9 @@ def _process(
         dirty_flag[flat] = 0
         is_frontier = False
         if visited[flat]:
-            r = flat // cols
-            c = flat - r * cols
             for k in range(8):
-                rr = r + NEIGHBOUR_ROWS[k]
-                cc = c + NEIGHBOUR_COLS[k]
-                if 0 <= rr < rows and 0 <= cc < cols and known[rr * cols + cc] == UNKNOWN:
+                v = neighbour_flat(flat, k, rows, cols)
+                if v >= 0 and known[v] == UNKNOWN:
                     is_frontier = True
                     break
         pos = frontier_pos[flat]
@@ -448,19 +435,21 @@ class EwfdFrontierDetector:
         # sensor and one cell of rounding, so no cell a scan changed is left out.
         self._half_cells = math.ceil(self.active_radius_m / spec.resolution_m) + 2
         n = spec.rows * spec.cols
-        self._known = np.full(spec.shape, UNKNOWN, dtype=np.int8)
-        self._visited = np.zeros(n, dtype=np.uint8)
-        self._label = np.zeros(n, dtype=np.int64)
-        self._parent = np.arange(64, dtype=np.int64)
-        self._piece_active = np.zeros(64, dtype=np.int64)
-        self._state = np.array([1, 0], dtype=np.int64)
-        self._queue = np.empty(n, dtype=np.int64)
-        self._mark = np.zeros(n, dtype=np.int64)
-        self._dirty = np.empty(n, dtype=np.int64)
-        self._dirty_flag = np.zeros(n, dtype=np.uint8)
-        self._changed = np.empty(n, dtype=np.int64)
-        self._frontier_pos = np.full(n, -1, dtype=np.int64)
-        self._frontier_list = np.empty(n, dtype=np.int64)
+        self._ewfd = EwfdArrays(
+            known=np.full(spec.shape, UNKNOWN, dtype=np.int8),
+            visited=np.zeros(n, dtype=np.uint8),
+            label=np.zeros(n, dtype=np.int64),
+            parent=np.arange(64, dtype=np.int64),
+            piece_active=np.zeros(64, dtype=np.int64),
+            counters=np.array([1, 0], dtype=np.int64),
+            changed=np.empty(n, dtype=np.int64),
+            queue=np.empty(n, dtype=np.int64),
+            mark=np.zeros(n, dtype=np.int64),
+            dirty=np.empty(n, dtype=np.int64),
+            dirty_flag=np.zeros(n, dtype=np.uint8),
+            frontier_pos=np.full(n, -1, dtype=np.int64),
+            frontier_list=np.empty(n, dtype=np.int64),
+        )
         self._previous_robots = np.zeros(0, dtype=np.int64)
         self._first = True
 
@@ -487,14 +476,13 @@ class EwfdFrontierDetector:
         return np.ascontiguousarray(windows, dtype=np.int64)
 
     def _reserve_ids(self, count: int) -> None:
-        needed = int(self._state[0]) + count + 1
-        if needed > len(self._parent):
-            size = max(needed, 2 * len(self._parent))
+        ewfd = self._ewfd
+        needed = int(ewfd.counters[0]) + count + 1
+        if needed > len(ewfd.parent):
+            size = max(needed, 2 * len(ewfd.parent))
             parent = np.arange(size, dtype=np.int64)
-            parent[: len(self._parent)] = self._parent
-            self._parent = parent
-            active = np.zeros(size, dtype=np.int64)
-            self._piece_active = active
+            parent[: len(ewfd.parent)] = ewfd.parent
+            self._ewfd = ewfd._replace(parent=parent, piece_active=np.zeros(size, dtype=np.int64))
 
     def update(
         self,
@@ -516,50 +504,28 @@ class EwfdFrontierDetector:
         robots = np.ascontiguousarray(self._flat_cells(robot_cells))
         if self.spec.cols % 8 == 0:
             values_words = values.view(np.uint64)
-            known_words = self._known.view(np.uint64)
+            known_words = self._ewfd.known.view(np.uint64)
         else:
             values_words = known_words = np.zeros((0, 0), dtype=np.uint64)
         n_changed, n_visited_changed = _diff(
-            values,
-            self._known,
-            values_words,
-            known_words,
-            self._visited,
-            self._windows(scan_cells),
-            self._changed,
+            values, values_words, known_words, self._windows(scan_cells), self._ewfd
         )
         self._first = False
         # Ids the update may create: one per split piece (<= 8 per removed cell) and one
         # per robot.
         self._reserve_ids(8 * n_visited_changed + len(robots))
-        _process(
-            self._known,
-            self._visited,
-            self._label,
-            self._parent,
-            self._piece_active,
-            self._state,
-            self._changed[:n_changed],
-            robots,
-            self._previous_robots,
-            self._queue,
-            self._mark,
-            self._dirty,
-            self._dirty_flag,
-            self._frontier_pos,
-            self._frontier_list,
-        )
+        _process(self._ewfd, n_changed, robots, self._previous_robots)
         self._previous_robots = robots
         return self.frontier_cells()
 
     def frontier_cells(self) -> np.ndarray:
         """Current frontier cells, (F, 2) ``[row, col]``, in no particular order."""
-        flat = self._frontier_list[: int(self._state[1])]
+        flat = self._ewfd.frontier_list[: int(self._ewfd.counters[1])]
         return np.stack(np.divmod(flat, self.spec.cols), axis=1)
 
     def visited_mask(self) -> np.ndarray:
         """The global memory of visited cells (free cells reachable from the robots)."""
-        return self._visited.reshape(self.spec.shape).astype(bool)
+        return self._ewfd.visited.reshape(self.spec.shape).astype(bool)
 
 
 class EwfdParams(StageParams):
@@ -581,16 +547,17 @@ def ewfd_detector(
     return EwfdFrontierDetector(spec, active_radius_m(mapping))
 
 
-@FRONTIER_DETECTORS.register("naive", NaiveFrontierParams)
 class NaiveFrontierDetector:
     """:func:`reachable_frontier_cells` over the whole grid at every update."""
-
-    def __init__(
-        self, params: NaiveFrontierParams, *, spec: GridSpec, mapping: MappingConfig
-    ) -> None:
-        self.params = params
 
     def update(
         self, values: np.ndarray, robot_cells: np.ndarray, scan_cells: np.ndarray | None
     ) -> np.ndarray:
         return reachable_frontier_cells(values, robot_cells)
+
+
+@FRONTIER_DETECTORS.register("naive", NaiveFrontierParams)
+def naive_detector(
+    params: NaiveFrontierParams, *, spec: GridSpec, mapping: MappingConfig
+) -> NaiveFrontierDetector:
+    return NaiveFrontierDetector()

@@ -213,6 +213,18 @@ def _fit_surfaces(
     return anchors, tilted / tilt[:, None], c / tilt**3, solver[:, 0, :]
 
 
+@numba.njit(cache=True, inline="always")
+def _beam_variance_m2(
+    along: float, range_m: float, range_std_m: float, range_rel: float, angle_std_rad: float
+) -> float:
+    """Variance of a beam endpoint along a surface normal: range noise along the beam and
+    bearing noise across it, mixed by ``along`` (cosine of the beam-normal angle)."""
+    sigma_r = range_std_m + range_rel * range_m
+    return (
+        along * along * sigma_r * sigma_r + (1.0 - along * along) * (range_m * angle_std_rad) ** 2
+    )
+
+
 @numba.njit(cache=True)
 def _accumulate(
     pose: np.ndarray,
@@ -268,11 +280,8 @@ def _accumulate(
         ux = c * directions[i, 0] - s * directions[i, 1]
         uy = s * directions[i, 0] + c * directions[i, 1]
         along = nx * ux + ny * uy
-        sigma_r = range_std + range_rel * ranges[i]
         variance = (
-            along * along * sigma_r * sigma_r
-            + (1.0 - along * along) * (ranges[i] * angle_std) ** 2
-            + line_variance[j]
+            _beam_variance_m2(along, ranges[i], range_std, range_rel, angle_std) + line_variance[j]
         )
         sigma = max(math.sqrt(variance), min_sigma)
         if match_distance[i] > max(gate, inlier_sigmas * sigma) or abs(r) > max(
@@ -343,11 +352,7 @@ def _noise_information(
         ux = c * query_directions[i, 0] - s * query_directions[i, 1]
         uy = s * query_directions[i, 0] + c * query_directions[i, 1]
         along = nx * ux + ny * uy
-        sigma_r = range_std + range_rel * query_ranges[i]
-        variance = (
-            along * along * sigma_r * sigma_r
-            + (1.0 - along * along) * (query_ranges[i] * angle_std) ** 2
-        )
+        variance = _beam_variance_m2(along, query_ranges[i], range_std, range_rel, angle_std)
         for a in range(3):
             for b in range(3):
                 info[a, b] += weighted_jacobians[i, a] * weighted_jacobians[i, b] * variance

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import KW_ONLY, dataclass
 from typing import Annotated, Literal
 
 import numpy as np
@@ -69,18 +70,18 @@ class DwaParams(StageParams):
 
 
 @LOCAL_PLANNERS.register("dwa", DwaParams)
+@dataclass(frozen=True)
 class DynamicWindowPlanner:
     """Scores sampled ``(v, omega)`` in the dynamic window and returns the best (4.56).
 
-    Each robot plans alone; the others enter as constant-velocity predictions.
+    Each robot plans alone; the others enter as constant-velocity predictions, so the
+    planner keeps no state between cycles.
     """
 
-    def __init__(
-        self, params: DwaParams, *, planning: PlanningConfig, robots: RobotsConfig
-    ) -> None:
-        self.params = params
-        self.planning = planning
-        self.robots = robots
+    params: DwaParams
+    _: KW_ONLY
+    planning: PlanningConfig
+    robots: RobotsConfig
 
     def plan(self, states: Team, goals_xy_m: Sequence[Xy], field: DistanceField) -> Commands:
         """One command per robot, each chosen with the others as moving obstacles."""

@@ -29,15 +29,17 @@ OCCLUSION_STOP_SHORT_CELLS = 1.5
 @numba.njit(cache=True)
 def _lines_of_sight_clear(
     occupied: np.ndarray,
-    origin_x_m: float,
-    origin_y_m: float,
-    resolution_m: float,
-    px_m: float,
-    py_m: float,
+    grid: tuple[float, float, float],
+    sensor_xy_m: tuple[float, float],
     targets_xy_m: np.ndarray,
     stop_short_m: float,
 ) -> np.ndarray:
-    """For each (M, 2) target, whether the grid ray to it is free up to ``stop_short_m``."""
+    """For each (M, 2) target, whether the grid ray to it is free up to ``stop_short_m``.
+
+    ``grid`` is (origin x, origin y, resolution) in metres.
+    """
+    origin_x_m, origin_y_m, resolution_m = grid
+    px_m, py_m = sensor_xy_m
     n = targets_xy_m.shape[0]
     clear = np.empty(n, dtype=np.bool_)
     for k in range(n):
@@ -94,9 +96,8 @@ class CameraSensor:
         if candidates.size:
             clear = _lines_of_sight_clear(
                 self._occupied,
-                *self._grid,
-                x,
-                y,
+                self._grid,
+                (x, y),
                 np.ascontiguousarray(self._landmarks[candidates, :2]),
                 self._stop_short_m,
             )

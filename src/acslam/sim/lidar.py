@@ -34,6 +34,27 @@ from acslam.messages import LidarScan
 from acslam.worlds.world import World
 
 
+@numba.njit(cache=True, inline="always")
+def _first_boundary(cell: int, direction: float) -> tuple[int, int]:
+    """Along one axis: the cell step (+-1, or 0 for a ray parallel to the axis) and the
+    index of the first cell boundary the ray crosses."""
+    if direction > 0.0:
+        return 1, cell + 1
+    if direction < 0.0:
+        return -1, cell
+    return 0, 0
+
+
+@numba.njit(cache=True, inline="always")
+def _crossing_m(
+    origin_m: float, boundary: int, resolution_m: float, start_m: float, direction: float
+) -> float:
+    """Distance along the ray to the boundary ``boundary`` of one axis (inf if parallel)."""
+    if direction == 0.0:
+        return math.inf
+    return (origin_m + boundary * resolution_m - start_m) / direction
+
+
 @numba.njit(cache=True)
 def grid_ray_m(
     occupied: np.ndarray,
@@ -59,39 +80,21 @@ def grid_ray_m(
         return 0.0
     # Each crossing distance is computed from its boundary index, not accumulated, so
     # ranges carry no drift over long rays.
-    step_col = 0
-    boundary_col = 0
-    t_x = math.inf
-    if dir_x > 0.0:
-        step_col = 1
-        boundary_col = col + 1
-    elif dir_x < 0.0:
-        step_col = -1
-        boundary_col = col
-    if step_col != 0:
-        t_x = (origin_x_m + boundary_col * resolution_m - px_m) / dir_x
-    step_row = 0
-    boundary_row = 0
-    t_y = math.inf
-    if dir_y > 0.0:
-        step_row = 1
-        boundary_row = row + 1
-    elif dir_y < 0.0:
-        step_row = -1
-        boundary_row = row
-    if step_row != 0:
-        t_y = (origin_y_m + boundary_row * resolution_m - py_m) / dir_y
+    step_col, boundary_col = _first_boundary(col, dir_x)
+    step_row, boundary_row = _first_boundary(row, dir_y)
+    t_x = _crossing_m(origin_x_m, boundary_col, resolution_m, px_m, dir_x)
+    t_y = _crossing_m(origin_y_m, boundary_row, resolution_m, py_m, dir_y)
     while True:
         if t_x < t_y:
             t = t_x
             col += step_col
             boundary_col += step_col
-            t_x = (origin_x_m + boundary_col * resolution_m - px_m) / dir_x
+            t_x = _crossing_m(origin_x_m, boundary_col, resolution_m, px_m, dir_x)
         else:
             t = t_y
             row += step_row
             boundary_row += step_row
-            t_y = (origin_y_m + boundary_row * resolution_m - py_m) / dir_y
+            t_y = _crossing_m(origin_y_m, boundary_row, resolution_m, py_m, dir_y)
         if t > max_range_m:
             return math.inf
         if row < 0 or row >= rows or col < 0 or col >= cols or occupied[row, col]:

@@ -68,17 +68,26 @@ def _row_starts(
     return ((x_mid, y, theta), (x_mid - 0.7, y, theta), (x_mid + 0.7, y, theta))
 
 
+def _layout(
+    start: Rect,
+    openings: tuple[Rect, ...],
+    rooms: tuple[Rect, ...],
+    starts: tuple[tuple[float, float, float], ...],
+) -> ThesisLayout:
+    """A layout whose robots start in ``start``, which ``openings`` join to the ``rooms``."""
+    return ThesisLayout(
+        spaces=(start, *openings, *rooms), start_area=start, start_openings=openings, starts=starts
+    )
+
+
 def _exp1() -> ThesisLayout:
     start = (18.0, 16.0, 22.0, 20.0)
     door = (19.5, 20.0, 20.5, 20.15)
     corridor = (15.0, 20.15, 25.0, 21.65)
     west, east = (10.85, 19.0, 14.85, 23.5), (25.15, 19.0, 29.15, 23.5)
     west_door, east_door = (14.85, 20.4, 15.0, 21.4), (25.0, 20.4, 25.15, 21.4)
-    return ThesisLayout(
-        spaces=(start, door, corridor, west, east, west_door, east_door),
-        start_area=start,
-        start_openings=(door,),
-        starts=_row_starts(17.5, math.pi / 2),
+    return _layout(
+        start, (door,), (corridor, west, east, west_door, east_door), _row_starts(17.5, math.pi / 2)
     )
 
 
@@ -86,12 +95,7 @@ def _exp2() -> ThesisLayout:
     start = (18.0, 17.0, 22.0, 21.0)
     doors = ((17.85, 18.5, 18.0, 19.5), (19.5, 21.0, 20.5, 21.15), (22.0, 18.5, 22.15, 19.5))
     rooms = ((13.85, 17.0, 17.85, 21.0), (18.0, 21.15, 22.0, 25.15), (22.15, 17.0, 26.15, 21.0))
-    return ThesisLayout(
-        spaces=(start, *doors, *rooms),
-        start_area=start,
-        start_openings=doors,
-        starts=_row_starts(18.2, math.pi / 2),
-    )
+    return _layout(start, doors, rooms, _row_starts(18.2, math.pi / 2))
 
 
 def _exp3() -> ThesisLayout:
@@ -106,10 +110,10 @@ def _exp3() -> ThesisLayout:
     west_corridor, east_corridor = (14.85, 19.4, 17.85, 20.6), (22.15, 19.4, 25.15, 20.6)
     west_room, east_room = (11.7, 18.5, 14.7, 21.5), (25.3, 18.5, 28.3, 21.5)
     west_door, east_door = (14.7, 19.5, 14.85, 20.5), (25.15, 19.5, 25.3, 20.5)
-    return ThesisLayout(
-        spaces=(
-            start,
-            *doors,
+    return _layout(
+        start,
+        doors,
+        (
             north,
             south,
             west_corridor,
@@ -119,9 +123,7 @@ def _exp3() -> ThesisLayout:
             west_door,
             east_door,
         ),
-        start_area=start,
-        start_openings=doors,
-        starts=_row_starts(20.9, 0.0),
+        _row_starts(20.9, 0.0),
     )
 
 
@@ -147,12 +149,7 @@ def _exp4() -> ThesisLayout:
         [(20.0, 17.75), (20.0, 16.9), (15.4, 16.9), (15.4, 14.6)],
     ]
     corridors = [rect for branch in branches for rect in _corridor(branch)]
-    return ThesisLayout(
-        spaces=(start, *openings, *corridors),
-        start_area=start,
-        start_openings=openings,
-        starts=_row_starts(19.6, math.pi / 2),
-    )
+    return _layout(start, openings, tuple(corridors), _row_starts(19.6, math.pi / 2))
 
 
 def _exp5() -> ThesisLayout:
@@ -167,12 +164,8 @@ def _exp5() -> ThesisLayout:
     )
     store = (28.15, 16.0, 31.15, 19.5)
     store_door = (28.0, 18.6, 28.15, 19.6)
-    return ThesisLayout(
-        spaces=(lab, *lab_doors, corridor, *offices, *office_doors, store, store_door),
-        start_area=lab,
-        start_openings=lab_doors,
-        starts=_row_starts(22.0, -math.pi / 2),
-    )
+    rooms = (corridor, *offices, *office_doors, store, store_door)
+    return _layout(lab, lab_doors, rooms, _row_starts(22.0, -math.pi / 2))
 
 
 LAYOUTS = {1: _exp1, 2: _exp2, 3: _exp3, 4: _exp4, 5: _exp5}
