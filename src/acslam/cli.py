@@ -203,7 +203,7 @@ def run_command(
     """Explore a scenario with the full server in the loop and write the run folder."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from acslam.runner import run_exploration
+    from acslam.runner import RunHooks, run_exploration
     from acslam.scenario import load_scenario
 
     if (drop_rate or latency_ms) and not distributed:
@@ -241,6 +241,7 @@ def run_command(
             )
 
         with _visualizer(viz, viz_out, scenario) as on_step:
+            hooks = RunHooks(on_progress=show, on_step=on_step)
             if distributed:
                 from acslam.distributed.launch import run_distributed
                 from acslam.distributed.robot_node import RobotOptions
@@ -249,12 +250,10 @@ def run_command(
                 options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
                 metrics = run_distributed(
                     scenario, scenario_name, out_dir, limit_s,
-                    robot_options=options, on_progress=show, on_step=on_step,
+                    robot_options=options, hooks=hooks,
                 )  # fmt: skip
             else:
-                metrics = run_exploration(
-                    scenario, out_dir, limit_s, on_progress=show, on_step=on_step
-                )
+                metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
     _print_summary(metrics, reachable_m2)
     _console.print(f"run folder: {out_dir}  (report: {out_dir / 'report.html'})")
 

@@ -47,6 +47,23 @@ from acslam.worlds.mapio import save_map
 EXPLORED_SAMPLE_PERIOD_S = 1.0
 
 
+ProgressHook = Callable[[Snapshot, float, float], None]
+"""Called with the snapshot, the simulated time and the explored m^2 once per second."""
+StepHook = Callable[[Snapshot, list[RobotMessage]], None]
+"""Called with every step's snapshot and that step's messages (live views)."""
+
+
+@dataclass(frozen=True)
+class RunHooks:
+    """What a caller watches of a run, in process or served."""
+
+    on_progress: ProgressHook | None = None
+    on_step: StepHook | None = None
+
+
+NO_HOOKS = RunHooks()
+
+
 def robot_name(robot_id: int) -> str:
     return f"robot_{robot_id}"
 
@@ -66,7 +83,7 @@ def run_loop(
     *,
     max_time_s: float,
     out_dir: Path,
-    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
+    on_step: StepHook | None = None,
 ) -> tuple[str, float]:
     """Step the server once per control period until explored, every robot lost, an
     error, or ``max_time_s``; returns the reason and the wall seconds it took. Any
@@ -101,12 +118,9 @@ def run_exploration(
     scenario: Scenario,
     out_dir: Path,
     max_time_s: float,
-    on_progress: Callable[[Snapshot, float, float], None] | None = None,
-    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
+    hooks: RunHooks = NO_HOOKS,
 ) -> dict:
-    """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written.
-
-    ``on_step`` sees every step's snapshot and the messages of that step (live views)."""
+    """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
@@ -114,10 +128,10 @@ def run_exploration(
     sim = scenario.simulator()
     server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
-    log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
+    log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
     source = SimulatedSource(sim, substeps)
     reason, wall_time_s = run_loop(
-        server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=on_step
+        server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
     )
     truth = TruthLog.of_simulator(sim)
     return finish_run(
@@ -141,7 +155,7 @@ class RunLog:
 
     spec: GridSpec
     last: Snapshot
-    on_progress: Callable[[Snapshot, float, float], None] | None = None
+    on_progress: ProgressHook | None = None
     timings_s: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
     explored_history: list[tuple[float, float]] = field(default_factory=list)
     _next_sample_s: float = 0.0

@@ -10,14 +10,12 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 from acslam.distributed.robot_node import RobotOptions
 from acslam.distributed.server_node import serve
-from acslam.messages import RobotMessage
-from acslam.pipeline.snapshot import Snapshot
+from acslam.runner import NO_HOOKS, RunHooks
 from acslam.scenario import Scenario
 
 ROBOT_EXIT_TIMEOUT_S = 15.0
@@ -76,8 +74,7 @@ def run_distributed(
     max_time_s: float,
     *,
     robot_options: RobotOptions | None = None,
-    on_progress: Callable[[Snapshot, float, float], None] | None = None,
-    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
+    hooks: RunHooks = NO_HOOKS,
 ) -> dict:
     """Start N robot processes, serve them until the run ends, collect; returns metrics."""
     robot_options = robot_options or RobotOptions()
@@ -99,9 +96,7 @@ def run_distributed(
             )
             with (out_dir / "logs" / f"robot_{i}.log").open("w") as log:
                 processes.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT))
-        return serve(
-            scenario, endpoint, out_dir, max_time_s, on_progress=on_progress, on_step=on_step
-        )
+        return serve(scenario, endpoint, out_dir, max_time_s, hooks=hooks)
     except BaseException:  # the server failed or was interrupted: the robots go with it
         for process in processes:
             process.kill()

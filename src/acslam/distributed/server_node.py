@@ -18,17 +18,16 @@ hear the server, so the two agree to a few milliseconds.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
-from acslam.pipeline.snapshot import Snapshot
 from acslam.runner import (
+    NO_HOOKS,
+    RunHooks,
     RunLog,
     TruthLog,
     finish_run,
@@ -59,8 +58,7 @@ def serve(
     max_time_s: float,
     *,
     options: ServeOptions | None = None,
-    on_progress: Callable[[Snapshot, float, float], None] | None = None,
-    on_step: Callable[[Snapshot, list[RobotMessage]], None] | None = None,
+    hooks: RunHooks = NO_HOOKS,
 ) -> dict:
     """Serve robots on ``listen`` until explored, all lost, or ``max_time_s``; returns
     the metrics written to ``out_dir``."""
@@ -77,12 +75,12 @@ def serve(
         for robot in missing:
             server.mark_lost(robot, 0.0)
             endpoint.ignore(robot)
-        log = RunLog(scenario.world.spec, server.snapshot(0.0), on_progress)
+        log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
         source = ZenohSource(endpoint, period_s, options.heartbeat_timeout_s)
         reason, wall_time_s = run_loop(
-            server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=on_step
+            server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
         )
         now_s = source.time_s
         lost = log.last.lost

@@ -68,7 +68,7 @@ def write_failure(folder: Path, reason: str, wall_time_s: float) -> RunResult:
 
 def execute_run(spec: RunSpec, folder: Path) -> RunResult:
     """Do one run into ``folder`` (in a worker process); never raises."""
-    from acslam.runner import run_exploration
+    from acslam.runner import RunHooks, run_exploration
     from acslam.scenario import load_scenario
 
     started = time.perf_counter()
@@ -84,7 +84,7 @@ def execute_run(spec: RunSpec, folder: Path) -> RunResult:
         scenario = load_scenario(spec.scenario, robots=spec.robots, seed=spec.seed)
         scenario = scenario.with_algorithms(spec.planner, spec.allocator)
         limit_s = spec.max_time_s or scenario.config.sim.max_time_s
-        metrics = run_exploration(scenario, folder, limit_s, on_progress=guard)
+        metrics = run_exploration(scenario, folder, limit_s, hooks=RunHooks(on_progress=guard))
     except Exception as exc:  # a worker must report, not die: the sweep goes on
         reason = str(exc) if isinstance(exc, AcslamError) else f"{type(exc).__name__}: {exc}"
         folder.mkdir(parents=True, exist_ok=True)

@@ -54,6 +54,9 @@ class GridPath:
 
 
 # --------------------------------------------------------------------------- binary heap
+# A min-heap over parallel key and item arrays. numba's ``heapq`` on a list of tuples was
+# measured 1.4x faster on an 800 x 800 Dijkstra, but it pops equal keys in another order,
+# and with it every run's paths, so it is a change of its own with before/after figures.
 
 
 @numba.njit(cache=True)
@@ -64,25 +67,19 @@ def _heap_push(
         keys = np.concatenate((keys, np.empty_like(keys)))
         items = np.concatenate((items, np.empty_like(items)))
     i = size
-    while i > 0:
+    while i > 0 and keys[(i - 1) >> 1] > key:
         parent = (i - 1) >> 1
-        if keys[parent] <= key:
-            break
-        keys[i] = keys[parent]
-        items[i] = items[parent]
+        keys[i], items[i] = keys[parent], items[parent]
         i = parent
-    keys[i] = key
-    items[i] = item
+    keys[i], items[i] = key, item
     return keys, items, size + 1
 
 
 @numba.njit(cache=True)
 def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, int, int]:
-    top_key = keys[0]
-    top_item = items[0]
+    top_key, top_item = keys[0], items[0]
     size -= 1
-    key = keys[size]
-    item = items[size]
+    key, item = keys[size], items[size]
     i = 0
     while True:
         child = 2 * i + 1
@@ -92,11 +89,9 @@ def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, in
             child += 1
         if keys[child] >= key:
             break
-        keys[i] = keys[child]
-        items[i] = items[child]
+        keys[i], items[i] = keys[child], items[child]
         i = child
-    keys[i] = key
-    items[i] = item
+    keys[i], items[i] = key, item
     return top_key, top_item, size
 
 
