@@ -43,7 +43,7 @@ def test_registries_hold_the_builtin_plugins_and_name_them_on_a_miss() -> None:
     names = {kind: registry.names() for kind, registry in REGISTRIES.items()}
     assert names == {
         "localizer": ["isam2"],
-        "mapper": ["log-odds"],
+        "mapper": ["log-odds", "submaps"],
         "frontier_detector": ["ewfd", "naive"],
         "clusterer": ["dbscan"],
         "allocator": ["factor-graph", "greedy", "hungarian", "thesis"],

@@ -28,6 +28,7 @@ from acslam.geometry import compose
 from acslam.grid import GridSpec
 from acslam.mapping import LogOddsGrid, TeamMap, compute_costmap, grid_spec_for_bounds
 from acslam.mapping.scan_matching import match_scans, prepare_scan
+from acslam.mapping.submaps import SubmapMappingConfig, SubmapTeamMap
 from acslam.pipeline.registry import ALLOCATORS
 from acslam.planning.astar import astar_cells
 from acslam.sim.lidar import LidarSensor
@@ -44,6 +45,40 @@ def _room_ranges(pose: np.ndarray, angles: np.ndarray, half_size_m: float) -> np
     ranges = np.minimum(np.abs(tx), np.abs(ty))
     ranges[ranges > 8.0] = np.inf
     return ranges
+
+
+def _correction_figures(
+    scans: list[tuple[np.ndarray, np.ndarray]], angles: np.ndarray, spec: GridSpec, quick: bool
+) -> Figure:
+    """One correction of 50 scans: a submap re-placed whole against each scan re-cast."""
+    config = SubmapMappingConfig(max_range_m=8.0, submap_travel_m=10.0, submap_max_scans=50)
+    exact, submaps = TeamMap(config, spec=spec), SubmapTeamMap(config, spec=spec)
+    for index, (ranges, pose) in enumerate(scans):
+        exact.add_scan(0, index, ranges, angles, pose)
+        submaps.add_scan(0, index, ranges, angles, pose)
+    shifts = iter(range(10**9))
+
+    def shifted(pose: np.ndarray, k: int) -> np.ndarray:
+        return pose + np.array([0.02, 0.01, 0.002]) * (k % 2)
+
+    def move_exact() -> None:
+        k = next(shifts)
+        for index, (_, pose) in enumerate(scans):
+            exact.move_scan(index, shifted(pose, k))
+
+    def move_submap() -> None:
+        submaps.move_scan(0, shifted(scans[0][1], next(shifts)))
+
+    exact_ms = median_ms(move_exact, 3 if quick else 10)
+    submap_ms = median_ms(move_submap, 10 if quick else 50)
+    return Figure(
+        "mapping",
+        f"correction of {len(scans)} scans: one submap re-placed",
+        submap_ms,
+        "ms",
+        "TeamMap.move_scan of each scan",
+        exact_ms,
+    )
 
 
 def bench_mapping(quick: bool) -> list[Figure]:
@@ -76,6 +111,7 @@ def bench_mapping(quick: bool) -> list[Figure]:
         team.move_scan("moved", scans[0][1] + (0.02 if next(shifts) % 2 else 0.0))
 
     move_ms = median_ms(move_one, 20 if quick else 100)
+    correction = _correction_figures(scans, angles, spec, quick)
     values = grid.to_occupancy_values()
     costmap_ms = median_ms(
         lambda: compute_costmap(values, spec, CostmapConfig(), RobotsConfig().radius_m),
@@ -96,6 +132,7 @@ def bench_mapping(quick: bool) -> list[Figure]:
         Figure(
             "mapping", "TeamMap.move_scan (global + robot)", move_ms, "ms", reference_name, copy_ms
         ),
+        correction,
         Figure(
             "mapping",
             "costmap (EDT + decay + lethal)",

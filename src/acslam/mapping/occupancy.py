@@ -202,6 +202,46 @@ def _scan_update(
     return flat_out[:m], delta_out[:m]
 
 
+@numba.njit(cache=True)
+def _place_rigid(
+    source: np.ndarray,
+    source_origin_xy_m: tuple[float, float],
+    transform: tuple[float, float, float, float],
+    target: np.ndarray,
+    target_origin_xy_m: tuple[float, float],
+    resolution_m: float,
+    sign: int,
+) -> None:
+    """Add ``sign`` x ``source`` moved by the rigid ``transform`` = (cos, sin, tx, ty) into
+    ``target``: every target cell whose centre maps back into the source takes the source
+    cell it lands in (nearest-cell inverse mapping: no holes under rotation)."""
+    cos_t, sin_t, tx_m, ty_m = transform
+    sx_m, sy_m = source_origin_xy_m
+    gx_m, gy_m = target_origin_xy_m
+    rows, cols = source.shape
+    x_lo = y_lo = math.inf
+    x_hi = y_hi = -math.inf
+    for corner in range(4):
+        qx = sx_m + (corner & 1) * cols * resolution_m
+        qy = sy_m + (corner >> 1) * rows * resolution_m
+        px = cos_t * qx - sin_t * qy + tx_m
+        py = sin_t * qx + cos_t * qy + ty_m
+        x_lo, x_hi = min(x_lo, px), max(x_hi, px)
+        y_lo, y_hi = min(y_lo, py), max(y_hi, py)
+    c_start = max(0, math.floor((x_lo - gx_m) / resolution_m))
+    c_stop = min(target.shape[1], math.floor((x_hi - gx_m) / resolution_m) + 1)
+    r_start = max(0, math.floor((y_lo - gy_m) / resolution_m))
+    r_stop = min(target.shape[0], math.floor((y_hi - gy_m) / resolution_m) + 1)
+    for r in range(r_start, r_stop):
+        dy = gy_m + (r + 0.5) * resolution_m - ty_m
+        for c in range(c_start, c_stop):
+            dx = gx_m + (c + 0.5) * resolution_m - tx_m
+            sc = math.floor((cos_t * dx + sin_t * dy - sx_m) / resolution_m)
+            sr = math.floor((cos_t * dy - sin_t * dx - sy_m) / resolution_m)
+            if 0 <= sr < rows and 0 <= sc < cols and source[sr, sc] != 0:
+                target[r, c] += sign * source[sr, sc]
+
+
 class LogOddsGrid:
     """Occupancy grid in the world frame on a fixed :class:`GridSpec` (eqs. 4.25-4.26).
 
@@ -333,6 +373,29 @@ class LogOddsGrid:
             raise ValueError("scan update was computed for a grid of another shape")
         self._accumulator.reshape(-1)[update.flat_indices] += sign * update.increments_fixed
 
+    def place(
+        self,
+        source_fixed: np.ndarray,
+        source_origin_xy_m: tuple[float, float],
+        transform: tuple[float, float, float, float],
+        sign: int,
+    ) -> None:
+        """Add (``sign=+1``) or exactly remove (``-1``) another accumulator at this grid's
+        resolution, moved by the rigid ``transform`` (cos, sin, tx, ty). The identity
+        copies it cell for cell when both grids' cells are aligned."""
+        if sign not in (1, -1):
+            raise ValueError(f"sign must be +1 or -1, got {sign!r}")
+        spec = self.spec
+        _place_rigid(
+            source_fixed,
+            source_origin_xy_m,
+            transform,
+            self._accumulator,
+            (spec.origin_x_m, spec.origin_y_m),
+            spec.resolution_m,
+            sign,
+        )
+
     def integrate(
         self,
         scan_ranges: np.ndarray,
@@ -382,14 +445,13 @@ class _PosedScan:
     range_max_m: float
 
 
-@MAPPERS.register("log-odds", MappingConfig)
-class TeamMap:
+class FusedGrids:
     """The global map fused from all robots plus one map per robot, kept in step.
 
-    Every scan is stored by key with its current pose so that :meth:`move_scan` can remove
-    it at the old pose and re-add it at the new one in the global grid and in its robot's
-    grid. Because accumulators are exact integers, the global grid always equals the sum
-    of the robot grids, so the map of any robot combination is available (:meth:`combined`).
+    Because accumulators are exact integers, the global grid always equals the sum of the
+    robot grids, so the map of any robot combination is available (:meth:`combined`).
+    Mappers differ in how scans reach these grids (:class:`TeamMap`, and the submaps of
+    :mod:`acslam.mapping.submaps`).
     """
 
     def __init__(self, config: MappingConfig, *, spec: GridSpec) -> None:
@@ -397,7 +459,6 @@ class TeamMap:
         self.config = config
         self.global_grid = LogOddsGrid(spec, config)
         self._robot_grids: dict[int, LogOddsGrid] = {}
-        self._scans: dict[Hashable, _PosedScan] = {}
         self._version = 0
         self._values: tuple[int, np.ndarray] | None = None
 
@@ -420,12 +481,6 @@ class TeamMap:
     def robot_known_mask(self, robot_id: int) -> np.ndarray:
         return self.robot_grid(robot_id).known_mask()
 
-    def __len__(self) -> int:
-        return len(self._scans)
-
-    def __contains__(self, scan_key: Hashable) -> bool:
-        return scan_key in self._scans
-
     @property
     def robot_ids(self) -> list[int]:
         return sorted(self._robot_grids)
@@ -436,15 +491,44 @@ class TeamMap:
             self._robot_grids[robot_id] = LogOddsGrid(self.spec, self.config)
         return self._robot_grids[robot_id]
 
+    def combined(self, robot_ids: Iterable[int]) -> LogOddsGrid:
+        """Map fused from the scans of the given robots only (a new, independent grid)."""
+        total = np.zeros(self.spec.shape, dtype=np.int64)
+        for robot_id in robot_ids:
+            if robot_id in self._robot_grids:
+                total += self._robot_grids[robot_id].accumulator_fixed
+        return LogOddsGrid(self.spec, self.config, total)
+
+    def _apply(self, robot_id: int, update: ScanUpdate, sign: int) -> None:
+        """Add or remove one scan update in the global grid and the robot's grid."""
+        self.global_grid.apply(update, sign)
+        self.robot_grid(robot_id).apply(update, sign)
+        self._version += 1
+
+
+@MAPPERS.register("log-odds", MappingConfig)
+class TeamMap(FusedGrids):
+    """Exact re-integration: every scan is stored by key with its current pose, and
+    :meth:`move_scan` removes it at the old pose and re-adds it at the new one. A
+    correction costs a ray cast per beam of every scan that moved."""
+
+    def __init__(self, config: MappingConfig, *, spec: GridSpec) -> None:
+        super().__init__(config, spec=spec)
+        self._scans: dict[Hashable, _PosedScan] = {}
+
+    def __len__(self) -> int:
+        return len(self._scans)
+
+    def __contains__(self, scan_key: Hashable) -> bool:
+        return scan_key in self._scans
+
     def scan_pose(self, scan_key: Hashable) -> np.ndarray:
         """Current sensor pose ``[x, y, theta]`` of a stored scan."""
         return self._scans[scan_key].pose.copy()
 
-    def _apply(self, scan: _PosedScan, pose: np.ndarray, sign: int) -> None:
+    def _apply_scan(self, scan: _PosedScan, pose: np.ndarray, sign: int) -> None:
         update = self.global_grid.scan_update(scan.ranges, scan.angles, pose, scan.range_max_m)
-        self.global_grid.apply(update, sign)
-        self.robot_grid(scan.robot_id).apply(update, sign)
-        self._version += 1
+        self._apply(scan.robot_id, update, sign)
 
     def add_scan(
         self,
@@ -465,7 +549,7 @@ class TeamMap:
             np.array(pose, dtype=np.float64).reshape(3),
             float(range_max_m),
         )
-        self._apply(scan, scan.pose, 1)
+        self._apply_scan(scan, scan.pose, 1)
         self._scans[scan_key] = scan
 
     def move_scan(self, scan_key: Hashable, new_pose: np.ndarray) -> None:
@@ -474,20 +558,12 @@ class TeamMap:
         pose = np.array(new_pose, dtype=np.float64).reshape(3)
         if np.array_equal(pose, scan.pose):
             return
-        self._apply(scan, scan.pose, -1)
+        self._apply_scan(scan, scan.pose, -1)
         moved = _PosedScan(scan.robot_id, scan.ranges, scan.angles, pose, scan.range_max_m)
-        self._apply(moved, pose, 1)
+        self._apply_scan(moved, pose, 1)
         self._scans[scan_key] = moved
 
     def remove_scan(self, scan_key: Hashable) -> None:
         """Take a scan out of every grid it is in."""
         scan = self._scans.pop(scan_key)
-        self._apply(scan, scan.pose, -1)
-
-    def combined(self, robot_ids: Iterable[int]) -> LogOddsGrid:
-        """Map fused from the scans of the given robots only (a new, independent grid)."""
-        total = np.zeros(self.spec.shape, dtype=np.int64)
-        for robot_id in robot_ids:
-            if robot_id in self._robot_grids:
-                total += self._robot_grids[robot_id].accumulator_fixed
-        return LogOddsGrid(self.spec, self.config, total)
+        self._apply_scan(scan, scan.pose, -1)

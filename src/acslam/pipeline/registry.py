@@ -29,6 +29,7 @@ ENTRY_POINT_GROUP = "acslam.plugins"
 BUILTIN_PLUGIN_MODULES = (
     "acslam.slam.localizer",
     "acslam.mapping.occupancy",
+    "acslam.mapping.submaps",
     "acslam.exploration.frontiers",
     "acslam.exploration.clustering",
     "acslam.exploration.allocation",
