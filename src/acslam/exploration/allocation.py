@@ -52,7 +52,7 @@ from acslam.exploration.clustering import FrontierCluster
 from acslam.mapping.costmap import Costmap
 from acslam.pipeline.registry import ALLOCATORS
 from acslam.pipeline.stages import Cells, Clusters, Goals
-from acslam.planning.astar import distances_from, snap_to_free
+from acslam.planning.astar import path_costs_to, snap_to_free
 
 _MIN_LOG_FACTOR = -600.0
 """Factor values below e^-600 are stored as e^-600 (doubles underflow near e^-745)."""
@@ -333,14 +333,14 @@ def cluster_distances_m(
         # With weight 0, astar's step factor computes 0 * inf on lethal cells (never
         # entered, so the NaN is harmless).
         with np.errstate(invalid="ignore"):
-            g = distances_from(
+            distances[i] = path_costs_to(
                 costmap.cost,
                 costmap.lethal,
                 (int(start[0]), int(start[1])),
+                targets,
                 spec.resolution_m,
                 params.path_cost_weight,
             )
-        distances[i] = g[targets[:, 0], targets[:, 1]]
     if params.distance_metric == "euclidean":
         return np.where(np.isfinite(distances), euclidean, np.inf)
     return distances

@@ -107,10 +107,13 @@ def _search(
     goal_r: int,
     goal_c: int,
     resolution_m: float,
+    targets: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A* to the goal, or Dijkstra to every cell when ``goal_r < 0``.
+    """A* to the goal, or Dijkstra when ``goal_r < 0``: until every flat cell of
+    ``targets`` is settled, or to every cell if ``targets`` is empty.
 
-    Returns the cost-to-come (inf where unreached) and each cell's parent (flat index).
+    Returns the cost-to-come (inf where unreached; final on settled cells, which include
+    the goal and the targets) and each cell's parent (flat index).
     """
     rows, cols = factor.shape
     g = np.full(rows * cols, np.inf)
@@ -119,6 +122,13 @@ def _search(
     keys = np.empty(1024, dtype=np.float64)
     items = np.empty(1024, dtype=np.int64)
     use_heuristic = goal_r >= 0
+    is_target = np.zeros(rows * cols, dtype=np.bool_)
+    targets_left = 0
+    for target in targets:
+        if not is_target[target]:
+            is_target[target] = True
+            targets_left += 1
+    stop_at_targets = targets_left > 0
     start = start_r * cols + start_c
     goal = goal_r * cols + goal_c if use_heuristic else -1
     g[start] = 0.0
@@ -130,6 +140,10 @@ def _search(
         closed[node] = True
         if node == goal:
             break
+        if stop_at_targets and is_target[node]:
+            targets_left -= 1
+            if targets_left == 0:
+                break
         r = node // cols
         c = node - r * cols
         for k in range(8):
@@ -199,31 +213,37 @@ def astar_cells(
     if lethal[sr, sc] or lethal[gr, gc]:
         which = "start" if lethal[sr, sc] else "goal"
         raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): {which} is lethal")
-    g, parent = _search(_factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m)
+    g, parent = _search(
+        _factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
+    )
     goal = gr * lethal.shape[1] + gc
     if not np.isfinite(g[goal]):
         raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): goal unreachable")
     return _trace(parent, goal, lethal.shape[1]), float(g[goal])
 
 
-def distances_from(
+def path_costs_to(
     cost: np.ndarray,
     lethal: np.ndarray,
     start_cell: tuple[int, int],
+    target_cells: np.ndarray,
     resolution_m: float,
     cost_weight: float,
 ) -> np.ndarray:
-    """Path cost from ``start_cell`` to every cell (inf if unreachable or lethal).
+    """Path cost from ``start_cell`` to each (T, 2) target cell (inf if unreachable).
 
-    One Dijkstra per robot gives its path distance to every frontier cluster at once,
-    in the same cost model as :func:`astar_cells`.
+    One Dijkstra per robot gives its path distance to every frontier cluster at once, in
+    the same cost model as :func:`astar_cells`. It stops once the last target is settled,
+    so its cost follows the distance to the farthest target, not the size of the map.
     """
     lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
     sr, sc = _check_cell("start", start_cell, lethal)
-    if lethal[sr, sc]:
-        return np.full(lethal.shape, np.inf)
-    g, _ = _search(_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m)
-    return g.reshape(lethal.shape)
+    targets = np.asarray(target_cells, dtype=np.int64).reshape(-1, 2)
+    if lethal[sr, sc] or len(targets) == 0:
+        return np.full(len(targets), np.inf)
+    flat = targets[:, 0] * lethal.shape[1] + targets[:, 1]
+    g, _ = _search(_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
+    return g[flat]
 
 
 # --------------------------------------------------------------------------- snapping
