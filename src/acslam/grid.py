@@ -27,8 +27,9 @@ def neighbour_flat(flat: int, k: int, rows: int, cols: int) -> int:
     Flat kernels (EWFD) walk neighbourhoods through this one helper, in the order of
     ``NEIGHBOUR_ROWS``/``NEIGHBOUR_COLS``.
     """
-    row = flat // cols + NEIGHBOUR_ROWS[k]
-    col = flat % cols + NEIGHBOUR_COLS[k]
+    row = flat // cols
+    col = flat - row * cols + NEIGHBOUR_COLS[k]
+    row += NEIGHBOUR_ROWS[k]
     if 0 <= row < rows and 0 <= col < cols:
         return row * cols + col
     return -1

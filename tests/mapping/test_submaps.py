@@ -7,12 +7,13 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from acslam.config import AlgorithmsConfig
 from acslam.mapping import TeamMap, grid_spec_for_bounds
 from acslam.mapping.submaps import SubmapMappingConfig, SubmapTeamMap
 from acslam.runner import run_exploration
-from acslam.scenario import Scenario, load_scenario
+from acslam.scenario import load_scenario
 
 CONFIG = SubmapMappingConfig(max_range_m=3.0, submap_travel_m=0.5, submap_max_scans=6)
 
@@ -139,12 +140,12 @@ def test_the_submaps_mapper_is_chosen_by_name() -> None:
     assert algorithms.mapper.submap_travel_m == 2.0
 
 
-def test_a_team_explores_a_thesis_world_with_the_submaps_mapper(tmp_path: Path) -> None:
-    base = load_scenario("thesis-exp2")
-    algorithms = base.config.algorithms.with_stage("mapper", "submaps")
-    config = base.config.model_copy(update={"algorithms": algorithms})
-    scenario = Scenario(config, base.source, base.world, base.starts, base.landmarks)
-    metrics = run_exploration(scenario, tmp_path, max_time_s=200.0)
+def test_a_team_explores_with_the_submaps_mapper(tiny_scenario: Path, tmp_path: Path) -> None:
+    data = yaml.safe_load(tiny_scenario.read_text())
+    data["algorithms"] = {"mapper": {"name": "submaps", "submap_travel_m": 0.5}}
+    path = tiny_scenario.parent / "submaps.yaml"
+    path.write_text(yaml.safe_dump(data))
+    metrics = run_exploration(load_scenario(path), tmp_path, max_time_s=120.0)
     # The thesis-grid bounds every mapper must keep.
     assert metrics["completed"], metrics["reason"]
     assert metrics["coverage"]["explored_fraction_of_reachable"] >= 0.99

@@ -76,17 +76,6 @@ class ScanUpdate:
         return self.increments_fixed / FIXED_POINT_SCALE
 
 
-@numba.njit(cache=True, inline="always")
-def _mark_cell(state: np.ndarray, r: int, c: int, bit: int, listed: np.ndarray, count: int) -> int:
-    """Set ``bit`` on cell (r, c), listing the cell the first time the scan touches it;
-    returns the new length of ``listed``."""
-    if state[r, c] == 0:
-        listed[count] = r * state.shape[1] + c
-        count += 1
-    state[r, c] |= bit
-    return count
-
-
 @numba.njit(cache=True)
 def _scan_update(
     ranges: np.ndarray,
@@ -122,6 +111,8 @@ def _scan_update(
     used = np.zeros(n, np.bool_)
     hit = np.zeros(n, np.bool_)
     max_cells = int(range_max_m / resolution_m) + 3
+    # Cells in first-touch order. Each mark writes its cell at ``listed[count]`` and counts
+    # it only if it is new (branch-free); the one spare slot takes the last such write.
     listed = np.empty(n * (max_cells + kernel_rows.shape[0]) + 1, np.int64)
     count = 0
 
@@ -146,7 +137,9 @@ def _scan_update(
         end_c[b] = int(np.floor((x_m + length * np.cos(a) - origin_x_m) / resolution_m))
         r, c = end_r[b], end_c[b]
         if hit[b] and 0 <= r < rows and 0 <= c < cols:
-            count = _mark_cell(state, r, c, _HIT_BIT, listed, count)
+            listed[count] = r * cols + c
+            count += state[r, c] == 0
+            state[r, c] |= _HIT_BIT
 
     # Pass 2: free cells along each beam (eq. 4.33), endpoint excluded.
     for b in range(n):
@@ -156,13 +149,13 @@ def _scan_update(
         for i in range(line.shape[0] - 1):
             r, c = line[i, 0], line[i, 1]
             if 0 <= r < rows and 0 <= c < cols and (state[r, c] & _HIT_BIT) == 0:
-                count = _mark_cell(state, r, c, _FREE_BIT, listed, count)
+                listed[count] = r * cols + c
+                count += state[r, c] == 0
+                state[r, c] |= _FREE_BIT
 
     # Pass 3: Gaussian kernel around each endpoint (eq. 4.34), max over the scan's beams
     # (without the cells beyond the endpoint unless kernel_beyond_hit, see LogOddsGrid).
-    for b in range(n):
-        if not hit[b]:
-            continue
+    for b in np.nonzero(hit)[0]:
         ux = uy = 0.0
         if not kernel_beyond_hit:
             ux = np.cos(theta_rad + angles[b])
@@ -173,7 +166,9 @@ def _scan_update(
             r = end_r[b] + kernel_rows[k]
             c = end_c[b] + kernel_cols[k]
             if 0 <= r < rows and 0 <= c < cols and kernel_weights[k] > hit_weight[r, c]:
-                count = _mark_cell(state, r, c, _LISTED_BIT, listed, count)
+                listed[count] = r * cols + c
+                count += state[r, c] == 0
+                state[r, c] |= _LISTED_BIT
                 hit_weight[r, c] = kernel_weights[k]
 
     # Pass 4: distance-weighted increments, rounded once to fixed point; scratch reset.
