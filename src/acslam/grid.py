@@ -21,17 +21,16 @@ NEIGHBOUR_COLS = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
 
 
 @numba.njit(cache=True, inline="always")
-def neighbour_flat(flat: int, k: int, rows: int, cols: int) -> int:
-    """Flat index of the ``k``-th 8-neighbour of the flat cell ``flat``; -1 outside the grid.
+def neighbour_flat(row: int, col: int, k: int, rows: int, cols: int) -> int:
+    """Flat index of the ``k``-th 8-neighbour of cell (row, col); -1 outside the grid.
 
     Flat kernels (EWFD) walk neighbourhoods through this one helper, in the order of
-    ``NEIGHBOUR_ROWS``/``NEIGHBOUR_COLS``.
+    ``NEIGHBOUR_ROWS``/``NEIGHBOUR_COLS``; the caller splits its flat cell once per walk.
     """
-    row = flat // cols
-    col = flat - row * cols + NEIGHBOUR_COLS[k]
-    row += NEIGHBOUR_ROWS[k]
-    if 0 <= row < rows and 0 <= col < cols:
-        return row * cols + col
+    r = row + NEIGHBOUR_ROWS[k]
+    c = col + NEIGHBOUR_COLS[k]
+    if 0 <= r < rows and 0 <= c < cols:
+        return r * cols + c
     return -1
 
 

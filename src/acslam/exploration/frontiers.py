@@ -225,8 +225,9 @@ def _process(
     for i in range(changed.shape[0]):
         flat = changed[i]
         n_dirty = _mark_dirty(flat, dirty, dirty_flag, n_dirty)
+        row, col = divmod(flat, cols)
         for k in range(8):
-            v = neighbour_flat(flat, k, rows, cols)
+            v = neighbour_flat(row, col, k, rows, cols)
             if v >= 0:
                 n_dirty = _mark_dirty(v, dirty, dirty_flag, n_dirty)
         if visited[flat] and known[flat] != FREE:
@@ -252,8 +253,9 @@ def _process(
     n_pieces = 0
     tail = 0
     for i in range(n_removed):
+        row, col = divmod(removed[i], cols)
         for k in range(8):
-            v = neighbour_flat(removed[i], k, rows, cols)
+            v = neighbour_flat(row, col, k, rows, cols)
             if v >= 0 and visited[v] and mark[v] == 0:
                 n_pieces += 1
                 lp[n_pieces] = n_pieces
@@ -274,8 +276,9 @@ def _process(
         pending[p] -= 1
         if piece_active[o] <= 1:
             continue
+        row, col = divmod(u, cols)
         for k in range(8):
-            v = neighbour_flat(u, k, rows, cols)
+            v = neighbour_flat(row, col, k, rows, cols)
             if v < 0 or not visited[v]:
                 continue
             m = mark[v]
@@ -314,8 +317,9 @@ def _process(
         flat = changed[i]
         if known[flat] != FREE or visited[flat]:
             continue
+        row, col = divmod(flat, cols)
         for k in range(8):
-            v = neighbour_flat(flat, k, rows, cols)
+            v = neighbour_flat(row, col, k, rows, cols)
             if v >= 0 and visited[v]:
                 visited[flat] = 1
                 label[flat] = _find(parent, label[v])
@@ -339,8 +343,9 @@ def _process(
         u = queue[head]
         head += 1
         lu = _find(parent, label[u])
+        row, col = divmod(u, cols)
         for k in range(8):
-            v = neighbour_flat(u, k, rows, cols)
+            v = neighbour_flat(row, col, k, rows, cols)
             if v < 0 or known[v] != FREE:
                 continue
             if not visited[v]:
@@ -383,8 +388,9 @@ def _process(
             u = queue[head]
             head += 1
             n_dirty = _mark_dirty(u, dirty, dirty_flag, n_dirty)
+            row, col = divmod(u, cols)
             for k in range(8):
-                v = neighbour_flat(u, k, rows, cols)
+                v = neighbour_flat(row, col, k, rows, cols)
                 if v >= 0 and visited[v]:
                     visited[v] = 0
                     queue[tail] = v
@@ -397,8 +403,9 @@ def _process(
         dirty_flag[flat] = 0
         is_frontier = False
         if visited[flat]:
+            row, col = divmod(flat, cols)
             for k in range(8):
-                v = neighbour_flat(flat, k, rows, cols)
+                v = neighbour_flat(row, col, k, rows, cols)
                 if v >= 0 and known[v] == UNKNOWN:
                     is_frontier = True
                     break
