@@ -56,6 +56,8 @@ class _Submap:
     """Anchor pose of the submap's current placement in the global and robot grids."""
     origin_xy_m: tuple[float, float]
     accumulator: np.ndarray
+    first_cell: tuple[int, int]
+    """Map-grid row and column of the open window's first cell (before cropping)."""
     scans: int = 0
     open: bool = True
 
@@ -111,7 +113,7 @@ class SubmapTeamMap(FusedGrids):
         update = self.global_grid.scan_update(ranges, angles, pose, range_max_m)
         self._apply(int(robot_id), update, 1)
         rows, cols = np.divmod(update.flat_indices, self.spec.cols)
-        r0, c0 = self._window_offset(submap)
+        r0, c0 = submap.first_cell
         rows, cols = rows - r0, cols - c0
         local = submap.accumulator
         if len(rows) and not (
@@ -167,17 +169,11 @@ class SubmapTeamMap(FusedGrids):
                 spec.origin_y_m + r0 * spec.resolution_m,
             ),
             accumulator=np.zeros((max(r1 - r0, 0), max(c1 - c0, 0)), dtype=np.int64),
+            first_cell=(int(r0), int(c0)),
         )
         self._submaps[index] = submap
         self._open[robot_id] = index
         return submap
-
-    def _window_offset(self, submap: _Submap) -> tuple[int, int]:
-        """Map-grid row and column of the submap's first cell."""
-        spec = self.spec
-        c0 = round((submap.origin_xy_m[0] - spec.origin_x_m) / spec.resolution_m)
-        r0 = round((submap.origin_xy_m[1] - spec.origin_y_m) / spec.resolution_m)
-        return r0, c0
 
     def _close(self, anchor: int) -> None:
         """Stop adding scans to a submap and crop it to the cells its scans touched."""
