@@ -128,6 +128,26 @@ def test_path_distance_respects_walls() -> None:
         assert result.cluster_of_robot == (1,)
 
 
+@pytest.mark.parametrize("gap", [True, False])
+def test_travel_graph_distances_follow_the_exact_paths(gap: bool) -> None:
+    """The coarse metric decides as the exact one, is as strict about reachability and
+    stays within two 0.2 m blocks of the exact lengths."""
+    spec, values = _corridor_world()
+    if not gap:
+        values[:, 50] = 100
+    costmap = compute_costmap(values, spec, CostmapConfig(), 0.1)
+    clusters = [_cluster_at(spec, xy) for xy in ((6.0, 1.0), (1.0, 1.0), (8.0, 3.0))]
+    robots = spec.world_to_cell(np.array([[4.0, 1.0], [9.0, 1.0]]))
+    exact = allocate(robots, clusters, costmap)
+    coarse = allocate(robots, clusters, costmap, distance_metric="travel-graph")
+    assert coarse.cluster_of_robot == exact.cluster_of_robot
+    reachable = np.isfinite(exact.distances_m)
+    np.testing.assert_array_equal(np.isfinite(coarse.distances_m), reachable)
+    assert (~reachable).any() != gap
+    error_m = np.abs(coarse.distances_m[reachable] - exact.distances_m[reachable])
+    assert error_m.max() <= 0.4
+
+
 def test_robot_without_reachable_cluster_is_idle_and_unreachable_clusters_are_excluded() -> None:
     spec, values = _corridor_world()
     values[:, 50] = 100  # close the gap: the right half is cut off

@@ -24,10 +24,14 @@ GROUPS = ("server", "mapping", "scan matching", "exploration", "planning", "slam
 
 
 def _exploration(quick: bool) -> list[Figure]:
-    from acslam.benchmarks.perception import bench_allocation, bench_frontiers
+    from acslam.benchmarks.perception import (
+        bench_allocation,
+        bench_frontiers,
+        bench_travel_distances,
+    )
 
     figures, final_map = bench_frontiers(quick)
-    return figures + bench_allocation(quick, **final_map)
+    return figures + bench_allocation(quick, **final_map) + bench_travel_distances(quick)
 
 
 def _runners() -> dict[str, Callable[[bool], list[Figure]]]:

@@ -12,12 +12,14 @@ from scipy.spatial import cKDTree
 from acslam.benchmarks.core import Figure, median_ms
 from acslam.config import (
     CostmapConfig,
+    DungeonWorld,
     LidarConfig,
     MappingConfig,
     RobotsConfig,
     ScanMatchingConfig,
     ThesisWorld,
 )
+from acslam.exploration.allocation import FactorGraphParams, cluster_distances_m
 from acslam.exploration.clustering import DbscanParams, FrontierCluster, cluster_frontiers
 from acslam.exploration.frontiers import (
     EwfdFrontierDetector,
@@ -33,6 +35,7 @@ from acslam.pipeline.registry import ALLOCATORS
 from acslam.planning.astar import astar_cells
 from acslam.sim.lidar import LidarSensor
 from acslam.worlds.generators import build_world
+from acslam.worlds.mapio import world_cells
 from acslam.worlds.world import World
 
 
@@ -314,3 +317,47 @@ def bench_allocation(
                 )
             )
     return figures
+
+
+def bench_travel_distances(quick: bool) -> list[Figure]:
+    """Allocation's robot-to-cluster path lengths through the travel graph (the
+    ``travel-graph`` distance metric) against one exact Dijkstra per robot, on a fully
+    known dungeon: 100 m x 100 m at 0.05 m (2000 x 2000), 10 robots, 50 targets."""
+    size_m, robots = (50.0, 3) if quick else (100.0, 10)
+    world = build_world(
+        DungeonWorld(generator="dungeon", width_m=size_m, height_m=size_m, room_count=int(size_m)),
+        0,
+    )
+    spec = world.spec
+    values = world_cells(world)
+    costmap = compute_costmap(values, spec, CostmapConfig(), RobotsConfig().radius_m)
+    rng = np.random.default_rng(0)
+    free = np.argwhere(~costmap.lethal)
+    cells = free[rng.choice(len(free), robots, replace=False)]
+    clusters = [
+        FrontierCluster(
+            cell[None, :], spec.cell_to_world(cell)[0], cell, spec.cell_to_world(cell)[0], 1, 0
+        )
+        for cell in free[rng.choice(len(free), 50, replace=False)]
+    ]
+    exact_params = FactorGraphParams()
+    graph_params = FactorGraphParams(distance_metric="travel-graph")
+    exact = cluster_distances_m(cells, clusters, costmap, exact_params)
+    approx = cluster_distances_m(cells, clusters, costmap, graph_params)
+    if not np.array_equal(np.isfinite(exact), np.isfinite(approx)):
+        raise AssertionError("the travel graph and Dijkstra disagree on what is reachable")
+    reachable = np.isfinite(exact)
+    relative = np.abs(approx - exact)[reachable] / np.maximum(exact[reachable], 1e-9)
+    window = f"{spec.rows}x{spec.cols}"
+    return [
+        Figure(
+            "exploration",
+            f"allocation distances, travel graph, {robots} robots x 50 clusters, {window}",
+            median_ms(partial(cluster_distances_m, cells, clusters, costmap, graph_params), 3),
+            "ms",
+            "one exact Dijkstra per robot",
+            median_ms(partial(cluster_distances_m, cells, clusters, costmap, exact_params), 1),
+            f"same reachability; length error {100 * np.percentile(relative, 95):.1f} % p95, "
+            f"{100 * relative.max():.1f} % max; goal <= 20 ms at 10 robots, 2000x2000",
+        )
+    ]

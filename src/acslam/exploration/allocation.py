@@ -46,13 +46,14 @@ import numpy as np
 from pydantic import Field
 from scipy.optimize import linear_sum_assignment
 
-from acslam.config import FiniteFloat, NonNegativeFloat, StageParams
+from acslam.config import FiniteFloat, NonNegativeFloat, PositiveFloat, StageParams
 from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.mapping.costmap import Costmap
 from acslam.pipeline.registry import ALLOCATORS
 from acslam.pipeline.stages import Cells, Clusters, Goals
 from acslam.planning.astar import path_costs_to, snap_to_free
+from acslam.planning.travel_graph import build_travel_graph, travel_costs
 
 _MIN_LOG_FACTOR = -600.0
 """Factor values below e^-600 are stored as e^-600 (doubles underflow near e^-745)."""
@@ -247,7 +248,7 @@ def _greedy_nearest(distances_m: np.ndarray) -> list[int | None]:
 
 # --------------------------------------------------------------------------- plugins
 
-DistanceMetric = Literal["path", "euclidean", "euclidean-unchecked"]
+DistanceMetric = Literal["path", "travel-graph", "euclidean", "euclidean-unchecked"]
 
 
 class TravelParams(StageParams):
@@ -257,9 +258,15 @@ class TravelParams(StageParams):
     # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
     commitment_m: NonNegativeFloat = 2.0
     # "path" = costmap path length from one Dijkstra per robot (walls respected;
-    # unreachable clusters excluded), "euclidean" = straight line where a path exists,
+    # unreachable clusters excluded), "travel-graph" = the same through the coarse graph
+    # of planning.travel_graph (exact reachability, lengths within a few per cent, cost
+    # bounded in big buildings), "euclidean" = straight line where a path exists,
     # "euclidean-unchecked" = straight line, no Dijkstra (the thesis's d).
     distance_metric: DistanceMetric = "path"
+    # The travel graph's block side (rounded to whole cells, at least one), and how
+    # many blocks around each robot and target are searched cell by cell.
+    travel_block_m: PositiveFloat = 0.2
+    travel_end_blocks: Annotated[int, Field(ge=1)] = 1
     # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
     # metres, the unit alpha is stated in.
     path_cost_weight: NonNegativeFloat = 0.0
@@ -314,7 +321,8 @@ def cluster_distances_m(
     costmap: Costmap,
     params: TravelParams,
 ) -> np.ndarray:
-    """(robots, clusters) d: Dijkstra path cost per robot, or straight-line metres."""
+    """(robots, clusters) d: path cost (Dijkstra per robot, or the travel graph for all of
+    them), or straight-line metres."""
     spec = costmap.spec
     cells = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
     targets = np.array([c.target_cell for c in clusters], dtype=np.int64).reshape(-1, 2)
@@ -325,22 +333,34 @@ def cluster_distances_m(
         return euclidean
     max_snap_cells = math.floor(params.start_snap_m / spec.resolution_m)
     distances = np.full((len(cells), len(targets)), np.inf)
+    snapped: list[int] = []
+    starts = []
     for i, cell in enumerate(cells):
         try:
             start = snap_to_free(costmap.lethal, (int(cell[0]), int(cell[1])), max_snap_cells)
         except NoPathError:
             continue
-        # With weight 0, astar's step factor computes 0 * inf on lethal cells (never
-        # entered, so the NaN is harmless).
-        with np.errstate(invalid="ignore"):
-            distances[i] = path_costs_to(
-                costmap.cost,
-                costmap.lethal,
-                (int(start[0]), int(start[1])),
-                targets,
-                spec.resolution_m,
-                params.path_cost_weight,
-            )
+        starts.append(start)
+        snapped.append(i)
+    # With weight 0, the step factor is 0 * inf on lethal cells (never entered, so the
+    # NaN is harmless).
+    with np.errstate(invalid="ignore"):
+        if params.distance_metric == "travel-graph" and snapped:
+            block_cells = max(1, round(params.travel_block_m / spec.resolution_m))
+            graph = build_travel_graph(
+                costmap.cost, costmap.lethal, spec.resolution_m, params.path_cost_weight,
+                block_cells,
+            )  # fmt: skip
+            distances[snapped] = travel_costs(
+                graph, costmap.cost, costmap.lethal, np.array(starts), targets,
+                spec.resolution_m, params.path_cost_weight, params.travel_end_blocks,
+            )  # fmt: skip
+        else:
+            for i, start in zip(snapped, starts, strict=True):
+                distances[i] = path_costs_to(
+                    costmap.cost, costmap.lethal, (int(start[0]), int(start[1])), targets,
+                    spec.resolution_m, params.path_cost_weight,
+                )  # fmt: skip
     if params.distance_metric == "euclidean":
         return np.where(np.isfinite(distances), euclidean, np.inf)
     return distances

@@ -60,7 +60,7 @@ class GridPath:
 
 
 @numba.njit(cache=True)
-def _heap_push(
+def heap_push(
     keys: np.ndarray, items: np.ndarray, size: int, key: float, item: int
 ) -> tuple[np.ndarray, np.ndarray, int]:
     if size == keys.shape[0]:
@@ -76,7 +76,7 @@ def _heap_push(
 
 
 @numba.njit(cache=True)
-def _heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, int, int]:
+def heap_pop(keys: np.ndarray, items: np.ndarray, size: int) -> tuple[float, int, int]:
     top_key, top_item = keys[0], items[0]
     size -= 1
     key, item = keys[size], items[size]
@@ -132,9 +132,9 @@ def _search(
     start = start_r * cols + start_c
     goal = goal_r * cols + goal_c if use_heuristic else -1
     g[start] = 0.0
-    keys, items, size = _heap_push(keys, items, 0, 0.0, start)
+    keys, items, size = heap_push(keys, items, 0, 0.0, start)
     while size > 0:
-        _, node, size = _heap_pop(keys, items, size)
+        _, node, size = heap_pop(keys, items, size)
         if closed[node]:
             continue
         closed[node] = True
@@ -167,7 +167,7 @@ def _search(
                     ar = abs(nr - goal_r)
                     ac = abs(nc - goal_c)
                     h = resolution_m * (max(ar, ac) + 0.41421356237309515 * min(ar, ac))
-                keys, items, size = _heap_push(keys, items, size, new_g + h, nxt)
+                keys, items, size = heap_push(keys, items, size, new_g + h, nxt)
     return g, parent
 
 
@@ -187,7 +187,8 @@ def _trace(parent: np.ndarray, goal: int, cols: int) -> np.ndarray:
     return out
 
 
-def _factor(cost: np.ndarray, cost_weight: float) -> np.ndarray:
+def step_factor(cost: np.ndarray, cost_weight: float) -> np.ndarray:
+    """What a step costs per metre: 1 + weight * the cell's cost (module docstring)."""
     return 1.0 + cost_weight * np.asarray(cost, dtype=np.float64)
 
 
@@ -214,7 +215,7 @@ def astar_cells(
         which = "start" if lethal[sr, sc] else "goal"
         raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): {which} is lethal")
     g, parent = _search(
-        _factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
+        step_factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
     )
     goal = gr * lethal.shape[1] + gc
     if not np.isfinite(g[goal]):
@@ -242,7 +243,7 @@ def path_costs_to(
     if lethal[sr, sc] or len(targets) == 0:
         return np.full(len(targets), np.inf)
     flat = targets[:, 0] * lethal.shape[1] + targets[:, 1]
-    g, _ = _search(_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
+    g, _ = _search(step_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
     return g[flat]
 
 
