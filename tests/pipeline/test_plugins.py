@@ -107,10 +107,10 @@ def test_plugins_chosen_in_yaml_explore(
     data["algorithms"] = {"allocator": {"name": "example-nearest"}}
     path = tiny_scenario.parent / "nearest.yaml"
     path.write_text(yaml.safe_dump(data))
-    metrics = run_exploration(load_scenario(path), tmp_path / "run", 120.0)
+    # A short exploration: 10 s take the team through the door into the second room.
+    metrics = run_exploration(load_scenario(path), tmp_path / "run", 10.0)
     assert metrics["allocator"] == "example-nearest" and metrics["planner"] == "fgp"
-    assert metrics["completed"], metrics["reason"]
-    assert metrics["coverage"]["explored_fraction_of_reachable"] >= 0.95
+    assert metrics["coverage"]["explored_fraction_of_reachable"] >= 0.6
     assert metrics["safety"]["obstacle_collisions"] == metrics["safety"]["robot_collisions"] == 0
 
 
@@ -118,14 +118,14 @@ def test_plugins_registered_by_an_entry_point_are_chosen_on_the_command_line(
     tiny_scenario: Path, tmp_path: Path
 ) -> None:
     """A package on the path that names the module in the ``acslam.plugins`` group: its
-    plugins become CLI choices; one robot runs 20 s with both example plugins."""
+    plugins become CLI choices; one robot runs 10 s with both example plugins."""
     dist = tmp_path / "site" / "acslam_example_plugins-0.1.dist-info"
     dist.mkdir(parents=True)
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: acslam-example-plugins\n")
     (dist / "entry_points.txt").write_text("[acslam.plugins]\nexamples = acslam_example_plugins\n")
     out = tmp_path / "run"
     command = [sys.executable, "-m", "acslam.cli", "run", "--scenario", str(tiny_scenario)]
-    command += ["--robots", "1", "--max-time", "20", "--out", str(out)]
+    command += ["--robots", "1", "--max-time", "10", "--out", str(out)]
     command += ["--allocator", "example-nearest", "--planner", "example-pursuit"]
     env = {"PYTHONPATH": f"{dist.parent}:{EXAMPLE_PLUGINS}", "PATH": "/usr/bin:/bin"}
     done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
@@ -136,5 +136,5 @@ def test_plugins_registered_by_an_entry_point_are_chosen_on_the_command_line(
     assert resolved["local_planner"] == {"name": "example-pursuit", "turn_gain_per_s": 1.5}
     truth = np.loadtxt(out / "trajectories" / "robot_0.groundtruth.tum")
     travelled_m = np.linalg.norm(np.diff(truth[:, 1:3], axis=0), axis=1).sum()
-    assert travelled_m > 1.0  # at most 0.4 m/s x 20 s = 8 m
+    assert travelled_m > 1.0  # at most 0.4 m/s x 10 s = 4 m
     assert metrics["coverage"]["robot_0"]["area_m2"] > 5.0
