@@ -6,11 +6,13 @@ import json
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from acslam.cli import cli
 from acslam.config import builtin_scenario_names
+from acslam.eval.report import rebuild_report
 from acslam.runner import run_exploration
 from acslam.scenario import load_scenario
 
@@ -89,6 +91,19 @@ def test_time_limit_still_writes_metrics_and_report_rebuilds(tmp_path: Path) -> 
     )
     assert result.returncode == 0, result.stderr
     assert "Timing (Table 5.1)" in (tmp_path / "report.html").read_text()
+    # Cycle time: ordered statistics for the cycle and every stage, and their figure.
+    cycle = metrics["server_cycle_ms"]
+    for stats in [cycle, *(v for v in cycle.values() if isinstance(v, dict))]:
+        assert 0 < stats["mean"] <= stats["max"] and stats["p95"] <= stats["p99"] <= stats["max"]
+    assert cycle["control_period_ms"] == 100.0 and "slam" in cycle
+    assert (tmp_path / "figures" / "cycle_time.png").is_file()
+    # A record written before stage timings were kept still rebuilds, without that figure.
+    with np.load(tmp_path / "run.npz") as data:
+        older = {k: data[k] for k in data if not k.startswith(("stage_", "control_period"))}
+    np.savez_compressed(tmp_path / "run.npz", **older)
+    (tmp_path / "figures" / "cycle_time.png").unlink()
+    rebuild_report(tmp_path)
+    assert not (tmp_path / "figures" / "cycle_time.png").exists()
 
 
 def test_report_of_a_folder_that_is_no_run(tmp_path: Path) -> None:

@@ -150,20 +150,23 @@ def failure_reason(exc: Exception, out_dir: Path) -> str:
 
 @dataclass
 class RunLog:
-    """What a run keeps of the server's snapshots: the latest one, every stage's timings,
-    and the explored area once per simulated second (reported as progress)."""
+    """What a run keeps of the server's snapshots: the latest one, every stage's timings
+    (``[simulated time, wall seconds]`` each time it ran), and the explored area once per
+    simulated second (reported as progress)."""
 
     spec: GridSpec
     last: Snapshot
     on_progress: ProgressHook | None = None
-    timings_s: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    timings_s: dict[str, list[tuple[float, float]]] = field(
+        default_factory=lambda: defaultdict(list)
+    )
     explored_history: list[tuple[float, float]] = field(default_factory=list)
     _next_sample_s: float = 0.0
 
     def record(self, snapshot: Snapshot) -> None:
         self.last = snapshot
         for stage, seconds in snapshot.timings_s.items():
-            self.timings_s[stage].append(seconds)
+            self.timings_s[stage].append((snapshot.time_s, seconds))
 
     def sample_explored(self, time_s: float) -> None:
         if time_s < self._next_sample_s:
@@ -228,7 +231,21 @@ def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
         explored_history=np.array(log.explored_history).reshape(-1, 2),
         landmarks_true=scenario.landmarks,
         landmarks_estimated=last.localization.landmarks(),
+        stage_names=np.array(list(log.timings_s), dtype=str),
+        stage_timings=[np.array(samples).reshape(-1, 2) for samples in log.timings_s.values()],
+        control_period_s=scenario.config.algorithms.planning.control_period_s,
     )
+
+
+def timing_statistics_ms(samples_ms: np.ndarray) -> dict[str, float]:
+    """Mean, p95, p99 and maximum: a stage that runs in few cycles (allocation) can be
+    slow where a whole-cycle p95 does not show it."""
+    return {
+        "mean": float(np.mean(samples_ms)),
+        "p95": float(np.percentile(samples_ms, 95)),
+        "p99": float(np.percentile(samples_ms, 99)),
+        "max": float(np.max(samples_ms)),
+    }
 
 
 def _metrics(
@@ -262,13 +279,8 @@ def _metrics(
     else:
         min_distance = math.inf
     collisions = truth.collisions
-    samples = log.timings_s
-    cycle = np.array(samples.get("cycle", [0.0]))
-    per_module = {
-        module: {"mean": 1000 * float(np.mean(v)), "p95": 1000 * float(np.percentile(v, 95))}
-        for module, v in samples.items()
-        if module != "cycle"
-    }
+    stages_ms = {stage: 1000 * np.array(samples)[:, 1] for stage, samples in log.timings_s.items()}
+    cycle_ms = stages_ms.pop("cycle", np.zeros(1))
     algorithms = scenario.config.algorithms
     return {
         "scenario": scenario.config.name,
@@ -297,9 +309,9 @@ def _metrics(
             "stuck_events": int(sum(last.stuck_events)),
         },
         "server_cycle_ms": {
-            "mean": 1000 * float(np.mean(cycle)),
-            "p95": 1000 * float(np.percentile(cycle, 95)),
-            **per_module,
+            **timing_statistics_ms(cycle_ms),
+            "control_period_ms": 1000 * algorithms.planning.control_period_s,
+            **{stage: timing_statistics_ms(ms) for stage, ms in stages_ms.items()},
         },
     }
 

@@ -11,7 +11,7 @@ import base64
 import html
 import json
 import math
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,9 @@ CONFUSION_COLOURS = {
 
 @dataclass
 class RunRecord:
-    """Everything the figures need: maps, masks, trajectories ``[t, x, y, theta]``."""
+    """Everything the figures need: maps, masks, trajectories ``[t, x, y, theta]``, and
+    each server stage's wall time ``[simulated time s, wall s]`` each time it ran
+    (``stage_timings[k]`` for ``stage_names[k]``; empty in records written before)."""
 
     spec: GridSpec
     true_occupied: np.ndarray
@@ -45,6 +47,9 @@ class RunRecord:
     explored_history: np.ndarray
     landmarks_true: np.ndarray
     landmarks_estimated: np.ndarray
+    stage_names: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=str))
+    stage_timings: list[np.ndarray] = field(default_factory=list)
+    control_period_s: float = 0.1
 
     def save(self, path: Path) -> None:
         arrays: dict[str, np.ndarray] = {
@@ -78,14 +83,15 @@ class RunRecord:
             for f in fields(cls):
                 if f.name == "spec":
                     continue
+                items = sorted(
+                    (k for k in data if k.startswith(f.name + ".")),
+                    key=lambda k: int(k.rsplit(".", 1)[1]),
+                )
                 if f.name in data:
                     values[f.name] = data[f.name]
-                else:
-                    items = sorted(
-                        (k for k in data if k.startswith(f.name + ".")),
-                        key=lambda k: int(k.rsplit(".", 1)[1]),
-                    )
+                elif items or (f.default is MISSING and f.default_factory is MISSING):
                     values[f.name] = [data[k] for k in items]
+                # else: written before the field existed, so it keeps its default
             return cls(**values)
         except (OSError, KeyError, ValueError) as exc:
             raise DataError(path, f"not a run record ({exc})") from None
@@ -218,6 +224,32 @@ def figure_explored(record: RunRecord, path: Path) -> None:
     _save(fig, path)
 
 
+TIMING_WINDOW_S = 10.0
+"""Simulated seconds per point of the cycle-time figure (its p95 over the window)."""
+
+
+def figure_cycle_time(record: RunRecord, path: Path) -> None:
+    """p95 of the whole cycle and of each stage per 10 s of simulated time, against the
+    control period: whether the cost of a cycle grows as the run goes on."""
+    fig, ax = plt.subplots(figsize=(7, 3.5), dpi=110)
+    for name, samples in zip(record.stage_names, record.stage_timings, strict=True):
+        if len(samples) == 0:
+            continue
+        windows = np.floor(samples[:, 0] / TIMING_WINDOW_S).astype(int)
+        starts = np.unique(windows)
+        p95_ms = [1000 * np.percentile(samples[windows == w, 1], 95) for w in starts]
+        style = {"color": "k", "lw": 2} if name == "cycle" else {"lw": 1}
+        ax.plot((starts + 0.5) * TIMING_WINDOW_S, p95_ms, label=str(name), **style)
+    period_ms = 1000 * float(record.control_period_s)
+    ax.axhline(period_ms, color="tab:red", ls=":", label=f"control period {period_ms:.0f} ms")
+    ax.set_xlabel("simulated time [s]")
+    ax.set_ylabel(f"p95 per {TIMING_WINDOW_S:.0f} s [ms]")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title("Server cycle and stages over the run")
+    _save(fig, path)
+
+
 def write_figures(out_dir: Path, record: RunRecord) -> list[Path]:
     folder = Path(out_dir) / "figures"
     folder.mkdir(parents=True, exist_ok=True)
@@ -231,6 +263,9 @@ def write_figures(out_dir: Path, record: RunRecord) -> list[Path]:
     figure_map(record.estimated_values, record, paths[1], "Final map (all robots)")
     figure_confusion(record, paths[2])
     figure_explored(record, paths[3])
+    if record.stage_timings:
+        paths.append(folder / "cycle_time.png")
+        figure_cycle_time(record, paths[-1])
     for i, known in enumerate(record.robot_known):
         values = np.where(known, record.estimated_values, -1)
         path = folder / f"exploration_robot_{i}.png"
@@ -254,6 +289,23 @@ def _table(header: list[str], rows: list[list[object]]) -> str:
         "<tr>" + "".join(f"<td>{_number(c)}</td>" for c in row) + "</tr>" for row in rows
     )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _cycle_table(cycle_ms: dict) -> str:
+    """Whole cycle and stages: mean, p95, p99, max, and p95 as a share of the control
+    period (runs written before p99 and max were recorded show a dash there)."""
+    period_ms = cycle_ms.get("control_period_ms", math.nan)
+    rows = [("whole cycle", cycle_ms)] + [
+        (k, v) for k, v in cycle_ms.items() if isinstance(v, dict)
+    ]
+    return _table(
+        ["stage", "mean", "p95", "p99", "max", "p95 / control period"],
+        [
+            [name, *(float(v.get(k, math.nan)) for k in ("mean", "p95", "p99", "max")),
+             float(v["p95"]) / period_ms]
+            for name, v in rows
+        ],
+    )  # fmt: skip
 
 
 def report_tables(metrics: dict) -> dict[str, str]:
@@ -315,15 +367,7 @@ def report_tables(metrics: dict) -> dict[str, str]:
             ],
         ),
         "Safety": _table(["metric", "value"], [[k, v] for k, v in metrics["safety"].items()]),
-        "Server cycle [ms]": _table(
-            ["module", "mean", "p95"],
-            [["whole cycle", metrics["server_cycle_ms"]["mean"], metrics["server_cycle_ms"]["p95"]]]
-            + [
-                [k, v["mean"], v["p95"]]
-                for k, v in metrics["server_cycle_ms"].items()
-                if isinstance(v, dict)
-            ],
-        ),
+        "Server cycle [ms]": _cycle_table(metrics["server_cycle_ms"]),
     }
     return tables
 
