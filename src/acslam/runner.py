@@ -237,7 +237,7 @@ def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
     )
 
 
-def timing_statistics_ms(samples_ms: np.ndarray) -> dict[str, float]:
+def _timing_statistics_ms(samples_ms: np.ndarray) -> dict[str, float]:
     """Mean, p95, p99 and maximum: a stage that runs in few cycles (allocation) can be
     slow where a whole-cycle p95 does not show it."""
     return {
@@ -279,7 +279,10 @@ def _metrics(
     else:
         min_distance = math.inf
     collisions = truth.collisions
-    stages_ms = {stage: 1000 * np.array(samples)[:, 1] for stage, samples in log.timings_s.items()}
+    stages_ms = {
+        str(stage): 1000 * samples[:, 1]
+        for stage, samples in zip(record.stage_names, record.stage_timings, strict=True)
+    }
     cycle_ms = stages_ms.pop("cycle", np.zeros(1))
     algorithms = scenario.config.algorithms
     return {
@@ -309,9 +312,9 @@ def _metrics(
             "stuck_events": int(sum(last.stuck_events)),
         },
         "server_cycle_ms": {
-            **timing_statistics_ms(cycle_ms),
+            **_timing_statistics_ms(cycle_ms),
             "control_period_ms": 1000 * algorithms.planning.control_period_s,
-            **{stage: timing_statistics_ms(ms) for stage, ms in stages_ms.items()},
+            **{stage: _timing_statistics_ms(ms) for stage, ms in stages_ms.items()},
         },
     }
 

@@ -334,11 +334,10 @@ def bench_travel_distances(quick: bool) -> list[Figure]:
     rng = np.random.default_rng(0)
     free = np.argwhere(~costmap.lethal)
     cells = free[rng.choice(len(free), robots, replace=False)]
+    targets = free[rng.choice(len(free), 50, replace=False)]
     clusters = [
-        FrontierCluster(
-            cell[None, :], spec.cell_to_world(cell)[0], cell, spec.cell_to_world(cell)[0], 1, 0
-        )
-        for cell in free[rng.choice(len(free), 50, replace=False)]
+        FrontierCluster(cell[None, :], centre_m, cell, centre_m, 1, 0)
+        for cell, centre_m in zip(targets, spec.cell_to_world(targets), strict=True)
     ]
     exact_params = FactorGraphParams()
     graph_params = FactorGraphParams(distance_metric="travel-graph")

@@ -289,7 +289,6 @@ def travel_costs(
     the fine cost where a target lies in a start's box, if lower."""
     starts = np.asarray(start_cells, dtype=np.int64).reshape(-1, 2)
     targets = np.asarray(target_cells, dtype=np.int64).reshape(-1, 2)
-    result = np.full((len(starts), len(targets)), np.inf)
     legs = []
     no_cells = np.zeros((0, 2), dtype=np.int64)
     for cell in targets:
@@ -303,9 +302,10 @@ def travel_costs(
         legs.append((nodes[reached], leg[reached]))
     n = graph.node_count
     offsets, neighbours, costs = [graph.offsets], [graph.neighbours], [graph.costs]
-    direct = np.full((len(starts), len(targets)), np.inf)
+    # The fine cost where a target lies in a start's box, lowered by the graph's below.
+    result = np.full((len(starts), len(targets)), np.inf)
     for s, cell in enumerate(starts):
-        seeds, seed_costs, direct[s] = _fine_costs(
+        seeds, seed_costs, result[s] = _fine_costs(
             graph, cost, lethal, cell, targets, resolution_m, cost_weight, end_blocks
         )
         reached = np.isfinite(seed_costs)
@@ -321,5 +321,5 @@ def travel_costs(
     from_starts = dijkstra(sources, directed=True, indices=np.arange(n, n + len(starts))) - 1.0
     for t, (nodes, leg) in enumerate(legs):
         through = (from_starts[:, nodes] + leg[None, :]).min(axis=1, initial=np.inf)
-        result[:, t] = np.minimum(direct[:, t], through)
+        result[:, t] = np.minimum(result[:, t], through)
     return result
