@@ -21,7 +21,7 @@ import numpy as np
 
 from acslam.config import MappingConfig
 from acslam.datasets.carmen import read_carmen
-from acslam.mapping import TeamMap, grid_spec_for_bounds
+from acslam.mapping.occupancy import TeamMap, grid_spec_for_bounds
 
 LOG = Path(__file__).resolve().parents[2] / "shared/datasets/intel_lab_carmen/intel.clf.bz2"
 MAX_RANGE_M = 15.0

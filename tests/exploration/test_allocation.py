@@ -10,7 +10,6 @@ import pytest
 
 from acslam.config import CostmapConfig
 from acslam.exploration.allocation import (
-    FactorGraphParams,
     joint_assignment_count,
     log_objective,
     solve_approximate,
@@ -18,6 +17,7 @@ from acslam.exploration.allocation import (
     unary_log_factors,
 )
 from acslam.exploration.clustering import FrontierCluster
+from acslam.exploration.params import FactorGraphParams
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
 from acslam.pipeline.registry import ALLOCATORS

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from acslam.config import CostmapConfig
-from acslam.exploration.clustering import DbscanParams, UnknownDiscCounter, cluster_frontiers
+from acslam.exploration.clustering import UnknownDiscCounter, cluster_frontiers
+from acslam.exploration.params import DbscanParams
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
 

@@ -7,7 +7,7 @@ import pytest
 
 from acslam.config import CostmapConfig
 from acslam.grid import GridSpec
-from acslam.mapping import LETHAL_COST, compute_costmap
+from acslam.mapping.costmap import LETHAL_COST, compute_costmap
 
 SPEC = GridSpec(1.0, -2.0, 0.1, 30, 40)
 CONFIG = CostmapConfig(cost_max=2.0, decay_lambda_per_m=3.0, radius_m=0.65, unknown_cost=0.3)

@@ -9,7 +9,7 @@ import pytest
 
 from acslam.config import MappingConfig
 from acslam.grid import GridSpec
-from acslam.mapping import FIXED_POINT_SCALE, LogOddsGrid, TeamMap, grid_spec_for_bounds
+from acslam.mapping.occupancy import FIXED_POINT_SCALE, LogOddsGrid, TeamMap, grid_spec_for_bounds
 
 QUANTUM = 1.0 / FIXED_POINT_SCALE
 

@@ -10,8 +10,9 @@ import numpy as np
 import yaml
 
 from acslam.config import AlgorithmsConfig
-from acslam.mapping import TeamMap, grid_spec_for_bounds
-from acslam.mapping.submaps import SubmapMappingConfig, SubmapTeamMap
+from acslam.mapping.occupancy import TeamMap, grid_spec_for_bounds
+from acslam.mapping.params import SubmapMappingConfig
+from acslam.mapping.submaps import SubmapTeamMap
 from acslam.runner import run_exploration
 from acslam.scenario import load_scenario
 

@@ -138,3 +138,44 @@ def test_plugins_registered_by_an_entry_point_are_chosen_on_the_command_line(
     travelled_m = np.linalg.norm(np.diff(truth[:, 1:3], axis=0), axis=1).sum()
     assert travelled_m > 1.0  # at most 0.4 m/s x 10 s = 4 m
     assert metrics["coverage"]["robot_0"]["area_m2"] > 5.0
+
+
+def test_validating_a_scenario_imports_no_algorithm() -> None:
+    """Built-ins are declared with their Params only: checking a scenario, ``--help`` and
+    a one-line config error need none of GTSAM, numba or SciPy."""
+    heavy = ("gtsam", "numba", "scipy", "cv2", "acslam.exploration.allocation")
+    code = (
+        "import sys\n"
+        "from acslam.config import load_scenario_config\n"
+        "for name in ('thesis-exp1', 'vineyard', 'dungeon-40'):\n"
+        "    load_scenario_config(name)\n"
+        f"print(sorted(m for m in {heavy!r} if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
+
+
+def test_a_declared_plugin_is_imported_when_first_built() -> None:
+    from typing import Literal
+
+    from acslam.exploration.params import GreedyParams
+
+    class LateParams(GreedyParams):
+        name: Literal["late-greedy"] = "late-greedy"  # type: ignore[assignment]
+
+    class MissingParams(GreedyParams):
+        name: Literal["missing"] = "missing"  # type: ignore[assignment]
+
+    ALLOCATORS.declare("late-greedy", LateParams, "acslam.exploration.allocation:GreedyAllocator")
+    ALLOCATORS.declare("missing", MissingParams, "acslam.exploration.nowhere:Allocator")
+    try:
+        from acslam.exploration.allocation import GreedyAllocator
+
+        assert ALLOCATORS.get("late-greedy").factory is GreedyAllocator
+        with pytest.raises(PluginError, match="allocator 'missing': cannot import"):
+            ALLOCATORS.create(MissingParams())
+        with pytest.raises(PluginError, match="expected 'module:attribute'"):
+            ALLOCATORS.declare("late-greedy", LateParams, "acslam.exploration.allocation")
+    finally:
+        ALLOCATORS.unregister("late-greedy")
+        ALLOCATORS.unregister("missing")

@@ -25,10 +25,11 @@ from acslam.errors import NoPathError
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
 from acslam.messages import VelocityCommand
-from acslam.planning.astar import AstarParams, lookahead_point, plan_path, remaining_length_m
-from acslam.planning.dwa import DwaParams, DynamicWindowPlanner
-from acslam.planning.fgp import FactorGraphPlanner, FgpParams
+from acslam.planning.astar import lookahead_point, plan_path, remaining_length_m
+from acslam.planning.dwa import DynamicWindowPlanner
+from acslam.planning.fgp import FactorGraphPlanner
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import AstarParams, DwaParams, FgpParams
 from acslam.planning.recovery import Recovery
 from acslam.planning.stuck import StuckDetector
 from acslam.sim.simulator import Simulator

@@ -10,8 +10,9 @@ from scipy import ndimage
 
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
-from acslam.planning.dwa import DwaParams, DynamicWindowPlanner, rollout_arcs
+from acslam.planning.dwa import DynamicWindowPlanner, rollout_arcs
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import DwaParams
 from acslam.sim.kinematics import limit_command, step_pose
 
 ROBOTS = RobotsConfig()

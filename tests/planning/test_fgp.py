@@ -14,12 +14,12 @@ from acslam.grid import GridSpec
 from acslam.planning.astar import lookahead_point, plan_path
 from acslam.planning.fgp import (
     FactorGraphPlanner,
-    FgpParams,
     FgpProblem,
     obstacle_errors,
     robot_errors,
 )
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import FgpParams
 from acslam.sim.kinematics import limit_command, step_pose
 
 ROBOTS = RobotsConfig()

@@ -12,7 +12,8 @@ from acslam.errors import SlamError
 from acslam.eval.metrics import pairwise_precision_recall
 from acslam.geometry import between, compose
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement
-from acslam.slam import SlamBackend, keys
+from acslam.slam import keys
+from acslam.slam.backend import SlamBackend
 
 DT = 0.1
 # Landmarks on a 1.5 m lattice: far apart relative to the 1 m gate and 3 cm noise, so the

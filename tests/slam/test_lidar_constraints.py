@@ -8,7 +8,7 @@ from acslam.config import LidarConfig, ScanMatchingConfig, SlamConfig
 from acslam.grid import GridSpec
 from acslam.messages import OdometryIncrement
 from acslam.sim.lidar import LidarSensor
-from acslam.slam import SlamBackend
+from acslam.slam.backend import SlamBackend
 from acslam.slam.lidar_constraints import LidarConstraints
 from acslam.worlds.world import World
 

@@ -28,7 +28,7 @@ from acslam.geometry import compose
 from acslam.grid import GridSpec
 from acslam.messages import LandmarkObservations, OdometryIncrement, VelocityCommand
 from acslam.sim.simulator import Simulator
-from acslam.slam import SlamBackend
+from acslam.slam.backend import SlamBackend
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.world import World
 

@@ -19,18 +19,21 @@ from acslam.config import (
     ScanMatchingConfig,
     ThesisWorld,
 )
-from acslam.exploration.allocation import FactorGraphParams, cluster_distances_m
-from acslam.exploration.clustering import DbscanParams, FrontierCluster, cluster_frontiers
+from acslam.exploration.allocation import cluster_distances_m
+from acslam.exploration.clustering import FrontierCluster, cluster_frontiers
 from acslam.exploration.frontiers import (
     EwfdFrontierDetector,
     active_radius_m,
     reachable_frontier_cells,
 )
+from acslam.exploration.params import DbscanParams, FactorGraphParams
 from acslam.geometry import compose
 from acslam.grid import GridSpec
-from acslam.mapping import LogOddsGrid, TeamMap, compute_costmap, grid_spec_for_bounds
+from acslam.mapping.costmap import compute_costmap
+from acslam.mapping.occupancy import LogOddsGrid, TeamMap, grid_spec_for_bounds
+from acslam.mapping.params import SubmapMappingConfig
 from acslam.mapping.scan_matching import match_scans, prepare_scan
-from acslam.mapping.submaps import SubmapMappingConfig, SubmapTeamMap
+from acslam.mapping.submaps import SubmapTeamMap
 from acslam.pipeline.registry import ALLOCATORS
 from acslam.planning.astar import astar_cells
 from acslam.sim.lidar import LidarSensor

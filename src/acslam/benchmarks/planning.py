@@ -14,9 +14,10 @@ from scipy.sparse.csgraph import dijkstra
 from acslam.benchmarks.core import Figure
 from acslam.config import PlanningConfig, RobotsConfig
 from acslam.grid import GridSpec
-from acslam.planning.astar import AstarParams, astar_cells
-from acslam.planning.fgp import FactorGraphPlanner, FgpParams
+from acslam.planning.astar import astar_cells
+from acslam.planning.fgp import FactorGraphPlanner
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import AstarParams, FgpParams
 from acslam.sim.kinematics import limit_command, step_pose
 
 RES_M = 0.05

@@ -39,18 +39,16 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Literal
 
 import gtsam
 import numpy as np
-from pydantic import Field
 from scipy.optimize import linear_sum_assignment
 
-from acslam.config import FiniteFloat, NonNegativeFloat, PositiveFloat, StageParams
 from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
+from acslam.exploration.params import TravelParams, UtilityParams
 from acslam.mapping.costmap import Costmap
-from acslam.pipeline.registry import ALLOCATORS
 from acslam.pipeline.stages import Cells, Clusters, Goals
 from acslam.planning.astar import path_costs_to, snap_to_free
 from acslam.planning.travel_graph import build_travel_graph, travel_costs
@@ -248,72 +246,6 @@ def _greedy_nearest(distances_m: np.ndarray) -> list[int | None]:
 
 # --------------------------------------------------------------------------- plugins
 
-DistanceMetric = Literal["path", "travel-graph", "euclidean", "euclidean-unchecked"]
-
-
-class TravelParams(StageParams):
-    """How every built-in allocator measures d, the travel to a cluster."""
-
-    # A robot's current goal counts this much closer when re-allocating: switching is
-    # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
-    commitment_m: NonNegativeFloat = 2.0
-    # "path" = costmap path length from one Dijkstra per robot (walls respected;
-    # unreachable clusters excluded), "travel-graph" = the same through the coarse graph
-    # of planning.travel_graph (exact reachability, lengths within a few per cent, cost
-    # bounded in big buildings), "euclidean" = straight line where a path exists,
-    # "euclidean-unchecked" = straight line, no Dijkstra (the thesis's d).
-    distance_metric: DistanceMetric = "path"
-    # The travel graph's block side (rounded to whole cells, at least one), and how
-    # many blocks around each robot and target are searched cell by cell.
-    travel_block_m: PositiveFloat = 0.2
-    travel_end_blocks: Annotated[int, Field(ge=1)] = 1
-    # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
-    # metres, the unit alpha is stated in.
-    path_cost_weight: NonNegativeFloat = 0.0
-    # A robot localised in a lethal cell (inflation band) starts from the nearest free
-    # cell within this radius, as the global planner's max_snap_m.
-    start_snap_m: NonNegativeFloat = 0.5
-
-
-class UtilityParams(TravelParams):
-    """Travel against gain: the unary log-factor -alpha d + beta s (eq. 4.40)."""
-
-    # alpha per metre of travel, beta per frontier cell, so with these values 20
-    # frontier cells (1 m at 0.05 m) are worth 1 m.
-    alpha: NonNegativeFloat = 1.0
-    beta: NonNegativeFloat = 0.05
-    # s of eq. 4.40: the cluster's frontier cells ("size"), or the unknown cells within
-    # sensor range of its target ("information_gain", scale beta down accordingly).
-    utility: Literal["size", "information_gain"] = "size"
-
-
-class GreedyParams(TravelParams):
-    name: Literal["greedy"] = "greedy"
-
-
-class HungarianParams(UtilityParams):
-    name: Literal["hungarian"] = "hungarian"
-
-
-class FactorGraphParams(UtilityParams):
-    name: Literal["factor-graph"] = "factor-graph"
-    # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
-    # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
-    # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
-    # sharing whenever there are enough clusters.
-    conflict_lambda: FiniteFloat = 0.01
-    # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
-    # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
-    # (~50 ms) the approximate solver (greedy + pairwise local repair) is used.
-    exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
-
-
-class ThesisParams(FactorGraphParams):
-    """The factor graph as the thesis states it: d is the straight line, unchecked."""
-
-    name: Literal["thesis"] = "thesis"
-    distance_metric: DistanceMetric = "euclidean-unchecked"
-
 
 def cluster_distances_m(
     robot_cells: np.ndarray,
@@ -421,7 +353,6 @@ class _TravelAllocator:
         raise NotImplementedError
 
 
-@ALLOCATORS.register("greedy", GreedyParams)
 class GreedyAllocator(_TravelAllocator):
     """Nearest robot-cluster pairs first, each cluster once while there are enough."""
 
@@ -431,7 +362,6 @@ class GreedyAllocator(_TravelAllocator):
         return self.solver, _greedy_nearest(distances_m)
 
 
-@ALLOCATORS.register("hungarian", HungarianParams)
 class HungarianAllocator(_TravelAllocator):
     """The best one-to-one assignment of eq. 4.40's unary values (no pairwise term)."""
 
@@ -441,8 +371,6 @@ class HungarianAllocator(_TravelAllocator):
         return self.solver, _hungarian(_unary(distances_m, clusters, self.params))
 
 
-@ALLOCATORS.register("thesis", ThesisParams)
-@ALLOCATORS.register("factor-graph", FactorGraphParams)
 class FactorGraphAllocator(_TravelAllocator):
     """Eq. 4.37's MAP on a discrete factor graph: exact, or approximate when large."""
 

@@ -10,27 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
 
-from acslam.config import PositiveFloat, StageParams
+from acslam.exploration.params import DbscanParams
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.mapping.costmap import Costmap
-from acslam.pipeline.registry import CLUSTERERS
-
-
-class DbscanParams(StageParams):
-    """DBSCAN clustering of frontier cells (thesis §4.5)."""
-
-    name: Literal["dbscan"] = "dbscan"
-    eps_m: PositiveFloat = 0.3
-    min_points: Annotated[int, Field(ge=1)] = 5
-    min_cluster_size: Annotated[int, Field(ge=1)] = 5
-    # Information gain = unknown cells within this radius of a cluster's target cell: the
-    # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
-    information_gain_radius_m: PositiveFloat = 8.0
 
 
 @dataclass(frozen=True)
@@ -129,7 +114,6 @@ def cluster_frontiers(
     return clusters
 
 
-@CLUSTERERS.register("dbscan", DbscanParams)
 class DbscanClusterer:
     """:func:`cluster_frontiers` with the scenario's parameters."""
 

@@ -52,15 +52,15 @@ its last unknown neighbour.
 from __future__ import annotations
 
 import math
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from scipy import ndimage
 
-from acslam.config import MappingConfig, StageParams
+from acslam.config import MappingConfig
+from acslam.exploration.params import EwfdParams, NaiveFrontierParams
 from acslam.grid import FREE, UNKNOWN, GridSpec, neighbour_flat
-from acslam.pipeline.registry import FRONTIER_DETECTORS
 
 _EIGHT = np.ones((3, 3), dtype=bool)
 
@@ -535,19 +535,6 @@ class EwfdFrontierDetector:
         return self._ewfd.visited.reshape(self.spec.shape).astype(bool)
 
 
-class EwfdParams(StageParams):
-    """EWFD has no parameters of its own: its active area follows the mapper's reach."""
-
-    name: Literal["ewfd"] = "ewfd"
-
-
-class NaiveFrontierParams(StageParams):
-    """The full-grid scan: the reference EWFD is checked against, and a baseline."""
-
-    name: Literal["naive"] = "naive"
-
-
-@FRONTIER_DETECTORS.register("ewfd", EwfdParams)
 def ewfd_detector(
     params: EwfdParams, *, spec: GridSpec, mapping: MappingConfig
 ) -> EwfdFrontierDetector:
@@ -563,7 +550,6 @@ class NaiveFrontierDetector:
         return reachable_frontier_cells(values, robot_cells)
 
 
-@FRONTIER_DETECTORS.register("naive", NaiveFrontierParams)
 def naive_detector(
     params: NaiveFrontierParams, *, spec: GridSpec, mapping: MappingConfig
 ) -> NaiveFrontierDetector:

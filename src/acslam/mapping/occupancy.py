@@ -24,7 +24,6 @@ import numpy as np
 
 from acslam.config import MappingConfig
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, bresenham
-from acslam.pipeline.registry import MAPPERS
 
 FIXED_POINT_SCALE = float(2**24)
 """Accumulator units per log-odds unit (a power of two, so conversion is exact)."""
@@ -501,7 +500,6 @@ class FusedGrids:
         self._version += 1
 
 
-@MAPPERS.register("log-odds", MappingConfig)
 class TeamMap(FusedGrids):
     """Exact re-integration: every scan is stored by key with its current pose, and
     :meth:`move_scan` removes it at the old pose and re-adds it at the new one. A

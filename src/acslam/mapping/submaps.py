@@ -22,29 +22,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
 
-from acslam.config import MappingConfig, PositiveFloat
 from acslam.geometry import wrap_angle
 from acslam.grid import GridSpec
 from acslam.mapping.occupancy import FusedGrids
-from acslam.pipeline.registry import MAPPERS
-
-
-class SubmapMappingConfig(MappingConfig):
-    """The ``submaps`` mapper: the log-odds model plus how scans are grouped.
-
-    A submap holds at most ``submap_max_scans`` scans (a cell gets one update per scan,
-    so this also bounds a submap's accumulator) and the scans taken within
-    ``submap_travel_m`` of its anchor.
-    """
-
-    name: Literal["submaps"] = "submaps"
-    submap_travel_m: PositiveFloat = 2.0
-    submap_max_scans: Annotated[int, Field(ge=1)] = 100
+from acslam.mapping.params import SubmapMappingConfig
 
 
 @dataclass
@@ -75,7 +59,6 @@ def rigid_transform(
     return cos_t, sin_t, tx, ty
 
 
-@MAPPERS.register("submaps", SubmapMappingConfig)
 class SubmapTeamMap(FusedGrids):
     """Team map composed of rigid per-robot submaps (see the module docstring)."""
 

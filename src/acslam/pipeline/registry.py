@@ -7,9 +7,16 @@ plus the pydantic model of its parameters. It registers under a name with a deco
     class NearestAllocator: ...
 
 and a scenario picks it by that name, ``algorithms.allocator: {name: nearest, ...}``; the
-section is validated by the plugin's own ``Params``. The built-in plugins live in the
-modules of :data:`BUILTIN_PLUGIN_MODULES`; a third-party package adds its own by naming a
-module in the ``acslam.plugins`` entry-point group, which is imported on first lookup.
+section is validated by the plugin's own ``Params``. A third-party package adds its own by
+naming a module in the ``acslam.plugins`` entry-point group, imported on first lookup.
+
+A plugin may instead be *declared* with its ``Params`` and the ``"module:attribute"`` of
+its implementation, which is imported when the plugin is first built::
+
+    ALLOCATORS.declare("nearest", NearestParams, "my_package.nearest:NearestAllocator")
+
+The built-ins are declared so (:mod:`acslam.pipeline.builtins`): validating a scenario,
+``--help`` or a one-line error then imports none of GTSAM, numba or SciPy.
 """
 
 from __future__ import annotations
@@ -26,29 +33,32 @@ from acslam.pipeline import stages
 
 ENTRY_POINT_GROUP = "acslam.plugins"
 
-BUILTIN_PLUGIN_MODULES = (
-    "acslam.slam.localizer",
-    "acslam.mapping.occupancy",
-    "acslam.mapping.submaps",
-    "acslam.exploration.frontiers",
-    "acslam.exploration.clustering",
-    "acslam.exploration.allocation",
-    "acslam.planning.astar",
-    "acslam.planning.dwa",
-    "acslam.planning.fgp",
-)
+BUILTIN_DECLARATIONS = "acslam.pipeline.builtins"
 
 T = TypeVar("T")
 
 
-@dataclass(frozen=True)
+@dataclass
 class Plugin:
-    """One registered implementation of a stage."""
+    """One registered implementation of a stage: its factory (a class or function called
+    with the params and the stage's context), or where to import it from."""
 
     kind: str
     name: str
-    factory: Callable[..., Any]
     params: type[StageParams]
+    _factory: Callable[..., Any] | str
+
+    @property
+    def factory(self) -> Callable[..., Any]:
+        if isinstance(self._factory, str):
+            module, _, attribute = self._factory.partition(":")
+            try:
+                self._factory = getattr(importlib.import_module(module), attribute)
+            except (ImportError, AttributeError) as exc:
+                raise PluginError(
+                    f"{self.kind} {self.name!r}: cannot import {self._factory!r}: {exc}"
+                ) from None
+        return self._factory
 
 
 class Registry:
@@ -62,18 +72,30 @@ class Registry:
 
     def register(self, name: str, params: type[StageParams]) -> Callable[[T], T]:
         """Decorator: register the decorated class as the ``name`` plugin of this kind."""
-        declared = params.model_fields["name"].default
-        if declared != name:
-            raise PluginError(f"{self.kind} {name!r}: its Params model declares name {declared!r}")
 
         def decorate(factory: T) -> T:
-            existing = self._plugins.get(name)
-            if existing is not None and existing.factory is not factory:
-                raise PluginError(f"{self.kind} {name!r} is registered twice")
-            self._plugins[name] = Plugin(self.kind, name, factory, params)  # type: ignore[arg-type]
+            self._add(name, params, factory)  # type: ignore[arg-type]
             return factory
 
         return decorate
+
+    def declare(self, name: str, params: type[StageParams], implementation: str) -> None:
+        """Register the ``name`` plugin whose factory is ``"module:attribute"``, imported
+        when the plugin is first built."""
+        if implementation.count(":") != 1:
+            raise PluginError(
+                f"{self.kind} {name!r}: expected 'module:attribute', got {implementation!r}"
+            )
+        self._add(name, params, implementation)
+
+    def _add(self, name: str, params: type[StageParams], factory: Callable | str) -> None:
+        declared = params.model_fields["name"].default
+        if declared != name:
+            raise PluginError(f"{self.kind} {name!r}: its Params model declares name {declared!r}")
+        existing = self._plugins.get(name)
+        if existing is not None and existing._factory != factory:
+            raise PluginError(f"{self.kind} {name!r} is registered twice")
+        self._plugins[name] = Plugin(self.kind, name, params, factory)
 
     def unregister(self, name: str) -> None:
         """Remove a plugin (for tests that register their own)."""
@@ -106,13 +128,12 @@ _loaded = False
 
 
 def load_plugins() -> None:
-    """Import the built-in plugin modules and every ``acslam.plugins`` entry point, once."""
+    """Declare the built-in plugins and import every ``acslam.plugins`` entry point, once."""
     global _loaded
     if _loaded:
         return
     _loaded = True
-    for module in BUILTIN_PLUGIN_MODULES:
-        importlib.import_module(module)
+    importlib.import_module(BUILTIN_DECLARATIONS)
     for entry in entry_points(group=ENTRY_POINT_GROUP):
         try:
             entry.load()

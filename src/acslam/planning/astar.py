@@ -21,16 +21,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numba
 import numpy as np
 
-from acslam.config import NonNegativeFloat, StageParams
 from acslam.errors import NoPathError
 from acslam.grid import NEIGHBOUR_COLS, NEIGHBOUR_ROWS, GridSpec
-from acslam.pipeline.registry import GLOBAL_PLANNERS
 from acslam.pipeline.stages import Grid, Xy, Xys
+from acslam.planning.params import AstarParams
 
 
 @dataclass(frozen=True)
@@ -375,20 +373,6 @@ def plan_path(
     return GridPath(cells, grid.cell_to_world(cells), path_cost, shortcut)
 
 
-class AstarParams(StageParams):
-    """The A* global planner (thesis §4.7)."""
-
-    name: Literal["astar"] = "astar"
-    # A* step cost = step length (m) * (1 + cost_weight * cell cost).
-    cost_weight: NonNegativeFloat = 5.0
-    # Start/goal inside lethal cells snap to the nearest free cell within this radius:
-    # a robot localised a few cells into the inflation band must still get a path.
-    max_snap_m: NonNegativeFloat = 0.5
-    # Line-of-sight smoothing of the A* path (shorter in metres; cost no longer optimal).
-    shortcut: bool = True
-
-
-@GLOBAL_PLANNERS.register("astar", AstarParams)
 class AstarPlanner:
     """:func:`plan_path` with the scenario's weight, snapping and smoothing."""
 

@@ -22,16 +22,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import KW_ONLY, dataclass
-from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import Field
 
-from acslam.config import NonNegativeFloat, PlanningConfig, RobotsConfig, StageParams
+from acslam.config import PlanningConfig, RobotsConfig
 from acslam.geometry import wrap_angles
-from acslam.pipeline.registry import LOCAL_PLANNERS
 from acslam.pipeline.stages import Commands, Team, Xy
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import DwaParams
 
 
 def _clearance_term(distance_m: np.ndarray, influence_m: float) -> np.ndarray:
@@ -55,21 +53,6 @@ def rollout_arcs(
     return np.stack([state.x_m + dx, state.y_m + dy], axis=-1), theta
 
 
-class DwaParams(StageParams):
-    """DWA (eqs. 4.48-4.56): velocity samples and the weights of eq. 4.51."""
-
-    name: Literal["dwa"] = "dwa"
-    v_samples: Annotated[int, Field(ge=2)] = 11
-    omega_samples: Annotated[int, Field(ge=3)] = 21
-    weight_progress: NonNegativeFloat = 1.0
-    weight_heading: NonNegativeFloat = 0.3
-    weight_costmap: NonNegativeFloat = 0.5
-    weight_robot: NonNegativeFloat = 0.5
-    # Each arc is sampled at least this often over T_p (and every half cell).
-    min_rollout_steps: Annotated[int, Field(ge=2)] = 10
-
-
-@LOCAL_PLANNERS.register("dwa", DwaParams)
 @dataclass(frozen=True)
 class DynamicWindowPlanner:
     """Scores sampled ``(v, omega)`` in the dynamic window and returns the best (4.56).

@@ -46,17 +46,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Annotated, Literal
 
 import gtsam
 import numpy as np
-from pydantic import Field
 
-from acslam.config import NonNegativeFloat, PlanningConfig, PositiveFloat, RobotsConfig, StageParams
+from acslam.config import PlanningConfig, RobotsConfig
 from acslam.geometry import wrap_angle
-from acslam.pipeline.registry import LOCAL_PLANNERS
 from acslam.pipeline.stages import Commands, Team, Xy
 from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.params import FgpParams
 
 _FREE_VELOCITY_SIGMA_MPS = 10.0
 _LAMBDA_INITIAL = 1e-3
@@ -114,31 +112,6 @@ class FgpProblem:
     field: DistanceField
 
 
-class FgpParams(StageParams):
-    """The joint factor-graph planner (eqs. 4.59-4.71).
-
-    Sigmas: start position is the measured pose (tight); start velocity may change by
-    about one acceleration step; dynamics position sigma keeps the states kinematically
-    consistent, the velocity sigma is ~max_acc * dt.
-    """
-
-    name: Literal["fgp"] = "fgp"
-    horizon_steps: Annotated[int, Field(ge=2)] = 10  # N, dt = T_p / N = 0.2 s
-    start_sigma_m: PositiveFloat = 0.001
-    start_sigma_mps: PositiveFloat = 0.05
-    dynamics_sigma_m: PositiveFloat = 0.005
-    dynamics_sigma_mps: PositiveFloat = 0.1
-    goal_sigma_m: PositiveFloat = 0.2  # moderate: the goal may yield to obstacles
-    obstacle_sigma: PositiveFloat = 0.1  # unitless error 1 - d / d_max
-    robot_sigma: PositiveFloat = 0.05  # unitless error 1 - d / d_max
-    # Cap on Levenberg-Marquardt linear solves per cycle (accepted and rejected steps).
-    max_iterations: Annotated[int, Field(ge=1)] = 20
-    # Sideways nudge of the initial guess when another robot is dead ahead: a symmetric
-    # head-on meeting is a saddle of eq. 4.69 where both robots would stop; both keep right.
-    keep_right_m: NonNegativeFloat = 0.1
-
-
-@LOCAL_PLANNERS.register("fgp", FgpParams)
 class FactorGraphPlanner:
     """Receding-horizon joint planner; keeps each robot's last solution for warm starts."""
 

@@ -11,7 +11,6 @@ import numpy as np
 
 from acslam.config import ScanMatchingConfig, SlamConfig
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, RobotSighting
-from acslam.pipeline.registry import LOCALIZERS
 from acslam.pipeline.stages import AssociationResult
 from acslam.slam.backend import SlamBackend
 from acslam.slam.lidar_constraints import LidarConstraints
@@ -22,7 +21,6 @@ EXTRA_ITERATIONS_AFTER_CLOSURE = 2
 EXTRA_ITERATIONS_AT_FINISH = 5
 
 
-@LOCALIZERS.register("isam2", SlamConfig)
 class Isam2Localizer:
     """SLAM of the team in one factor graph (thesis §4.4.1-4.4.2)."""
 

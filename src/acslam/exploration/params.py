@@ -1,0 +1,105 @@
+"""Parameters of the frontier, clustering and allocation plugins, apart from their code.
+
+Validating a scenario needs only these models, so it imports no algorithm (and none of
+GTSAM, numba or SciPy); :mod:`acslam.pipeline.builtins` names the implementation each
+belongs to.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field
+
+from acslam.config import FiniteFloat, NonNegativeFloat, PositiveFloat, StageParams
+
+
+class EwfdParams(StageParams):
+    """EWFD has no parameters of its own: its active area follows the mapper's reach."""
+
+    name: Literal["ewfd"] = "ewfd"
+
+
+class NaiveFrontierParams(StageParams):
+    """The full-grid scan: the reference EWFD is checked against, and a baseline."""
+
+    name: Literal["naive"] = "naive"
+
+
+class DbscanParams(StageParams):
+    """DBSCAN clustering of frontier cells (thesis §4.5)."""
+
+    name: Literal["dbscan"] = "dbscan"
+    eps_m: PositiveFloat = 0.3
+    min_points: Annotated[int, Field(ge=1)] = 5
+    min_cluster_size: Annotated[int, Field(ge=1)] = 5
+    # Information gain = unknown cells within this radius of a cluster's target cell: the
+    # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
+    information_gain_radius_m: PositiveFloat = 8.0
+
+
+DistanceMetric = Literal["path", "travel-graph", "euclidean", "euclidean-unchecked"]
+
+
+class TravelParams(StageParams):
+    """How every built-in allocator measures d, the travel to a cluster."""
+
+    # A robot's current goal counts this much closer when re-allocating: switching is
+    # worth it only for a frontier > 2 m nearer (about 10 s of driving at 0.22 m/s).
+    commitment_m: NonNegativeFloat = 2.0
+    # "path" = costmap path length from one Dijkstra per robot (walls respected;
+    # unreachable clusters excluded), "travel-graph" = the same through the coarse graph
+    # of planning.travel_graph (exact reachability, lengths within a few per cent, cost
+    # bounded in big buildings), "euclidean" = straight line where a path exists,
+    # "euclidean-unchecked" = straight line, no Dijkstra (the thesis's d).
+    distance_metric: DistanceMetric = "path"
+    # The travel graph's block side (rounded to whole cells, at least one), and how
+    # many blocks around each robot and target are searched cell by cell.
+    travel_block_m: PositiveFloat = 0.2
+    travel_end_blocks: Annotated[int, Field(ge=1)] = 1
+    # Dijkstra step cost = metres * (1 + weight * cell cost); 0 makes d a plain length in
+    # metres, the unit alpha is stated in.
+    path_cost_weight: NonNegativeFloat = 0.0
+    # A robot localised in a lethal cell (inflation band) starts from the nearest free
+    # cell within this radius, as the global planner's max_snap_m.
+    start_snap_m: NonNegativeFloat = 0.5
+
+
+class UtilityParams(TravelParams):
+    """Travel against gain: the unary log-factor -alpha d + beta s (eq. 4.40)."""
+
+    # alpha per metre of travel, beta per frontier cell, so with these values 20
+    # frontier cells (1 m at 0.05 m) are worth 1 m.
+    alpha: NonNegativeFloat = 1.0
+    beta: NonNegativeFloat = 0.05
+    # s of eq. 4.40: the cluster's frontier cells ("size"), or the unknown cells within
+    # sensor range of its target ("information_gain", scale beta down accordingly).
+    utility: Literal["size", "information_gain"] = "size"
+
+
+class GreedyParams(TravelParams):
+    name: Literal["greedy"] = "greedy"
+
+
+class HungarianParams(UtilityParams):
+    name: Literal["hungarian"] = "hungarian"
+
+
+class FactorGraphParams(UtilityParams):
+    name: Literal["factor-graph"] = "factor-graph"
+    # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
+    # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
+    # lambda << 1); lambda <= 1 keeps it a penalty, a strongly negative lambda forbids
+    # sharing whenever there are enough clusters.
+    conflict_lambda: FiniteFloat = 0.01
+    # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
+    # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
+    # (~50 ms) the approximate solver (greedy + pairwise local repair) is used.
+    exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
+
+
+class ThesisParams(FactorGraphParams):
+    """The factor graph as the thesis states it: d is the straight line, unchecked."""
+
+    name: Literal["thesis"] = "thesis"
+    distance_metric: DistanceMetric = "euclidean-unchecked"
