@@ -18,17 +18,32 @@ def _odometry(stamp: float) -> OdometryIncrement:
     return OdometryIncrement(0, stamp, max(stamp - 0.05, 0.0), 0.01, 0.0, 0.0)
 
 
-def test_messages_play_in_periods_from_the_first_stamp() -> None:
-    stamps = [0.25, 0.0, 0.1, 0.05]  # out of order on purpose: the source sorts
-    source = RecordedSource([_odometry(t) for t in stamps], period_s=0.1)
+def _batches(source: RecordedSource) -> list[list[float]]:
     batches = []
     while not source.finished:
         batches.append([m.stamp for m in source.receive()])
         source.advance()
-    # [0, 0.1) then [0.1, 0.2) then [0.2, 0.3)
-    assert batches == [[0.0, 0.05], [0.1], [0.25]]
-    assert source.time_s == pytest.approx(0.3)
+    return batches
+
+
+def test_messages_play_as_the_server_receives_them() -> None:
+    """The step at T gets what was stamped in (T - period, T], T from the first stamp."""
+    stamps = [0.25, 0.0, 0.1, 0.05, 0.3]  # out of order on purpose: the source sorts
+    source = RecordedSource([_odometry(t) for t in stamps], period_s=0.1)
+    assert _batches(source) == [[0.0], [0.05, 0.1], [], [0.25, 0.3]]
+    assert source.time_s == pytest.approx(0.4)
     assert source.newly_lost() == []
+
+
+def test_steps_count_from_the_recordings_start_and_tolerate_ns_rounding() -> None:
+    """A stamp a few ns past a step (a ROS stamp rounded to ns) is on time; one a
+    microsecond late waits for the next step. Steps are start + k period, never a sum."""
+    stamps = [1.3 + 2e-9, 1.3 + 1e-6, 101.0]
+    source = RecordedSource([_odometry(t) for t in stamps], period_s=0.1, start_s=1.0)
+    batches = _batches(source)
+    assert batches[:4] == [[], [], [], [1.3 + 2e-9]]
+    assert batches[4] == [1.3 + 1e-6]
+    assert batches[-1] == [101.0] and len(batches) == 1001
 
 
 def test_equal_stamps_keep_their_order() -> None:

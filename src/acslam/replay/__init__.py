@@ -2,10 +2,10 @@
 localizer stage as ``acslam run``, scored against what the recording provides.
 
 :func:`localize` is the loop every replay shares: the recording plays as a
-:class:`~acslam.sources.recorded.RecordedSource`, one server control period at a time,
-into :class:`~acslam.pipeline.perception.Perception`, with the loop-closure search at the
-server's map-update period. Presets of tuned algorithms for a kind of recording are YAML
-files in ``presets/``.
+:class:`~acslam.sources.recorded.RecordedSource`, in the batches the server receives from
+a live team, into :class:`~acslam.pipeline.perception.Perception`, with the loop-closure
+search every map-update period from the first step, as the server schedules it. Presets
+of tuned algorithms for a kind of recording are YAML files in ``presets/``.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from acslam.messages import LandmarkObservations, RobotMessage
 from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import LOCALIZERS
 from acslam.pipeline.stages import AssociationResult, Localizer
-from acslam.sources.recorded import RecordedSource
+from acslam.sources.recorded import STAMP_TOLERANCE_S, RecordedSource
 
 
 def preset(name: str) -> AlgorithmsConfig:
@@ -46,8 +46,10 @@ def localize(
     messages: Sequence[RobotMessage],
     algorithms: AlgorithmsConfig,
     starts: dict[int, np.ndarray],
+    start_s: float | None = None,
 ) -> Replayed:
-    """Play ``messages`` through the localizer stage ``algorithms`` names.
+    """Play ``messages`` through the localizer stage ``algorithms`` names, from the
+    recording's first stamp ``start_s`` (default: the first message's).
 
     The robot filter uses the default robot size (a recording does not say it); it only
     matters when a scan sees another robot of the team.
@@ -57,12 +59,12 @@ def localize(
     )
     reach_m = RobotsConfig().radius_m + algorithms.server.robot_filter_margin_m
     perception = Perception(localizer, starts, reach_m)
-    source = RecordedSource(messages, algorithms.planning.control_period_s)
+    source = RecordedSource(messages, algorithms.planning.control_period_s, start_s)
     scans: list[KeptScan] = []
     landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]] = []
     next_search_s = -math.inf
     while not source.finished:
-        search = source.time_s >= next_search_s
+        search = source.time_s >= next_search_s - STAMP_TOLERANCE_S
         if search:
             next_search_s = source.time_s + algorithms.server.map_update_period_s
         localized = perception.localize(source.receive(), close_loops=search)

@@ -172,7 +172,9 @@ def run_carmen(
     messages = carmen_messages(log, offset)
     first = min(log.scans, key=lambda s: (s.stamp_s, s.line))
     slam_start = time.perf_counter()
-    result = localize(messages, algorithms, {0: first.laser_pose_xytheta})
+    result = localize(
+        messages, algorithms, {0: first.laser_pose_xytheta}, start_s=log.records[0].stamp_s
+    )
     slam_s = time.perf_counter() - slam_start
     localizer = result.localizer
 
