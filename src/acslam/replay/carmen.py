@@ -6,7 +6,8 @@ run`` (:func:`acslam.replay.localize`) with the ``carmen`` preset of algorithms
 Odometry poses (ODOM lines and the odometry pose of each FLASER line) are moved to the
 laser frame by the fixed robot-to-laser offset read off the FLASER lines, and consecutive
 poses become :class:`OdometryIncrement` messages, as the simulator's robots send them; the
-absolute odometry frame is never used beyond the start pose.
+absolute odometry frame is never used beyond the start pose, the laser pose of the first
+record (where the increments begin).
 
 Outputs: ``trajectory.tum`` holds one laser pose per FLASER line the localizer kept, in
 file order, stamped with the line's ipc timestamp: its keyframe's optimised pose composed
@@ -170,11 +171,16 @@ def run_carmen(
         raise DataError(path, "no usable FLASER line")
     offset = laser_offset(log)
     messages = carmen_messages(log, offset)
-    first = min(log.scans, key=lambda s: (s.stamp_s, s.line))
-    slam_start = time.perf_counter()
-    result = localize(
-        messages, algorithms, {0: first.laser_pose_xytheta}, start_s=log.records[0].stamp_s
+    # The increments begin at the first record (an ODOM line may come before any FLASER
+    # line), so the estimate starts at that record's laser pose.
+    first = log.records[0]
+    start = (
+        first.laser_pose_xytheta
+        if isinstance(first, LaserRecord)
+        else compose(first.pose_xytheta, offset)
     )
+    slam_start = time.perf_counter()
+    result = localize(messages, algorithms, {0: start}, start_s=first.stamp_s)
     slam_s = time.perf_counter() - slam_start
     localizer = result.localizer
 
