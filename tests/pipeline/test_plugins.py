@@ -160,14 +160,14 @@ def test_a_declared_plugin_is_imported_when_first_built() -> None:
 
     from acslam.exploration.params import GreedyParams
 
+    @ALLOCATORS.declare("acslam.exploration.allocation:GreedyAllocator")
     class LateParams(GreedyParams):
         name: Literal["late-greedy"] = "late-greedy"  # type: ignore[assignment]
 
+    @ALLOCATORS.declare("acslam.exploration.nowhere:Allocator")
     class MissingParams(GreedyParams):
         name: Literal["missing"] = "missing"  # type: ignore[assignment]
 
-    ALLOCATORS.declare("late-greedy", LateParams, "acslam.exploration.allocation:GreedyAllocator")
-    ALLOCATORS.declare("missing", MissingParams, "acslam.exploration.nowhere:Allocator")
     try:
         from acslam.exploration.allocation import GreedyAllocator
 
@@ -175,7 +175,7 @@ def test_a_declared_plugin_is_imported_when_first_built() -> None:
         with pytest.raises(PluginError, match="allocator 'missing': cannot import"):
             ALLOCATORS.create(MissingParams())
         with pytest.raises(PluginError, match="expected 'module:attribute'"):
-            ALLOCATORS.declare("late-greedy", LateParams, "acslam.exploration.allocation")
+            ALLOCATORS.declare("acslam.exploration.allocation")
     finally:
         ALLOCATORS.unregister("late-greedy")
         ALLOCATORS.unregister("missing")

@@ -1,8 +1,8 @@
-"""Parameters of the frontier, clustering and allocation plugins, apart from their code.
+"""What a scenario may set of the frontier detectors, the clusterer and the allocators.
 
-Validating a scenario needs only these models, so it imports no algorithm (and none of
-GTSAM, numba or SciPy); :mod:`acslam.pipeline.builtins` names the implementation each
-belongs to.
+These models are all that validating a scenario needs, so it imports none of the
+algorithms (nor GTSAM, numba or SciPy); each is declared to its registry with the
+``module:attribute`` of its implementation, imported when the plugin is first built.
 """
 
 from __future__ import annotations
@@ -12,20 +12,10 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from acslam.config import FiniteFloat, NonNegativeFloat, PositiveFloat, StageParams
+from acslam.pipeline.registry import ALLOCATORS, CLUSTERERS, FRONTIER_DETECTORS
 
 
-class EwfdParams(StageParams):
-    """EWFD has no parameters of its own: its active area follows the mapper's reach."""
-
-    name: Literal["ewfd"] = "ewfd"
-
-
-class NaiveFrontierParams(StageParams):
-    """The full-grid scan: the reference EWFD is checked against, and a baseline."""
-
-    name: Literal["naive"] = "naive"
-
-
+@CLUSTERERS.declare("acslam.exploration.clustering:DbscanClusterer")
 class DbscanParams(StageParams):
     """DBSCAN clustering of frontier cells (thesis §4.5)."""
 
@@ -36,6 +26,20 @@ class DbscanParams(StageParams):
     # Information gain = unknown cells within this radius of a cluster's target cell: the
     # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
     information_gain_radius_m: PositiveFloat = 8.0
+
+
+@FRONTIER_DETECTORS.declare("acslam.exploration.frontiers:ewfd_detector")
+class EwfdParams(StageParams):
+    """EWFD has no parameters of its own: its active area follows the mapper's reach."""
+
+    name: Literal["ewfd"] = "ewfd"
+
+
+@FRONTIER_DETECTORS.declare("acslam.exploration.frontiers:naive_detector")
+class NaiveFrontierParams(StageParams):
+    """The full-grid scan: the reference EWFD is checked against, and a baseline."""
+
+    name: Literal["naive"] = "naive"
 
 
 DistanceMetric = Literal["path", "travel-graph", "euclidean", "euclidean-unchecked"]
@@ -77,15 +81,26 @@ class UtilityParams(TravelParams):
     utility: Literal["size", "information_gain"] = "size"
 
 
+@ALLOCATORS.declare("acslam.exploration.allocation:GreedyAllocator")
 class GreedyParams(TravelParams):
+    """Nearest robot-cluster pairs first, by travel alone: the simplest baseline, blind
+    to how much a cluster would reveal."""
+
     name: Literal["greedy"] = "greedy"
 
 
+@ALLOCATORS.declare("acslam.exploration.allocation:HungarianAllocator")
 class HungarianParams(UtilityParams):
+    """Distinct clusters for the robots maximising the total utility of eq. 4.40 (a
+    linear assignment): the baseline the factor graph is compared with."""
+
     name: Literal["hungarian"] = "hungarian"
 
 
+@ALLOCATORS.declare("acslam.exploration.allocation:FactorGraphAllocator")
 class FactorGraphParams(UtilityParams):
+    """The discrete factor graph of thesis §4.6: utilities and a pairwise sharing penalty."""
+
     name: Literal["factor-graph"] = "factor-graph"
     # Pairwise factor e^lambda if two robots share a cluster, e otherwise (eq. 4.41): a
     # shared cluster costs 1 - lambda in log units (~1 m of travel at the thesis's
@@ -98,6 +113,7 @@ class FactorGraphParams(UtilityParams):
     exact_max_joint_assignments: Annotated[int, Field(ge=1)] = 50_000
 
 
+@ALLOCATORS.declare("acslam.exploration.allocation:FactorGraphAllocator")
 class ThesisParams(FactorGraphParams):
     """The factor graph as the thesis states it: d is the straight line, unchecked."""
 

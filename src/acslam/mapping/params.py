@@ -1,8 +1,8 @@
 """Parameters of the mapper plugins, apart from their code.
 
 Validating a scenario needs only these models, so it imports no algorithm (and none of
-GTSAM, numba or SciPy); :mod:`acslam.pipeline.builtins` names the implementation each
-belongs to.
+GTSAM, numba or SciPy): each model is declared to its registry with the implementation,
+which is imported when the plugin is first built.
 """
 
 from __future__ import annotations
@@ -12,8 +12,10 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from acslam.config import MappingConfig, PositiveFloat
+from acslam.pipeline.registry import MAPPERS
 
 
+@MAPPERS.declare("acslam.mapping.submaps:SubmapTeamMap")
 class SubmapMappingConfig(MappingConfig):
     """The ``submaps`` mapper: the log-odds model plus how scans are grouped.
 
@@ -25,3 +27,6 @@ class SubmapMappingConfig(MappingConfig):
     name: Literal["submaps"] = "submaps"
     submap_travel_m: PositiveFloat = 2.0
     submap_max_scans: Annotated[int, Field(ge=1)] = 100
+
+
+MAPPERS.declare("acslam.mapping.occupancy:TeamMap")(MappingConfig)

@@ -10,13 +10,16 @@ and a scenario picks it by that name, ``algorithms.allocator: {name: nearest, ..
 section is validated by the plugin's own ``Params``. A third-party package adds its own by
 naming a module in the ``acslam.plugins`` entry-point group, imported on first lookup.
 
-A plugin may instead be *declared* with its ``Params`` and the ``"module:attribute"`` of
-its implementation, which is imported when the plugin is first built::
+A plugin may instead be *declared* on its ``Params`` model with the ``"module:attribute"``
+of its implementation, which is imported when the plugin is first built::
 
-    ALLOCATORS.declare("nearest", NearestParams, "my_package.nearest:NearestAllocator")
+    @ALLOCATORS.declare("my_package.nearest:NearestAllocator")
+    class NearestParams(StageParams):
+        name: Literal["nearest"] = "nearest"
 
-The built-ins are declared so (:mod:`acslam.pipeline.builtins`): validating a scenario,
-``--help`` or a one-line error then imports none of GTSAM, numba or SciPy.
+The built-ins are declared so, in the ``params`` module of each stage package
+(:data:`BUILTIN_PARAMS_MODULES`): validating a scenario, ``--help`` or a one-line error
+then imports none of GTSAM, numba or SciPy.
 """
 
 from __future__ import annotations
@@ -33,9 +36,15 @@ from acslam.pipeline import stages
 
 ENTRY_POINT_GROUP = "acslam.plugins"
 
-BUILTIN_DECLARATIONS = "acslam.pipeline.builtins"
+BUILTIN_PARAMS_MODULES = (
+    "acslam.slam.params",
+    "acslam.mapping.params",
+    "acslam.exploration.params",
+    "acslam.planning.params",
+)
 
 T = TypeVar("T")
+P = TypeVar("P", bound=type[StageParams])
 
 
 @dataclass
@@ -79,14 +88,17 @@ class Registry:
 
         return decorate
 
-    def declare(self, name: str, params: type[StageParams], implementation: str) -> None:
-        """Register the ``name`` plugin whose factory is ``"module:attribute"``, imported
-        when the plugin is first built."""
+    def declare(self, implementation: str) -> Callable[[P], P]:
+        """Decorator on a Params model: register the plugin its ``name`` field names,
+        whose factory ``"module:attribute"`` is imported when the plugin is first built."""
         if implementation.count(":") != 1:
-            raise PluginError(
-                f"{self.kind} {name!r}: expected 'module:attribute', got {implementation!r}"
-            )
-        self._add(name, params, implementation)
+            raise PluginError(f"{self.kind}: expected 'module:attribute', got {implementation!r}")
+
+        def decorate(params: P) -> P:
+            self._add(params.model_fields["name"].default, params, implementation)
+            return params
+
+        return decorate
 
     def _add(self, name: str, params: type[StageParams], factory: Callable | str) -> None:
         declared = params.model_fields["name"].default
@@ -133,7 +145,8 @@ def load_plugins() -> None:
     if _loaded:
         return
     _loaded = True
-    importlib.import_module(BUILTIN_DECLARATIONS)
+    for module in BUILTIN_PARAMS_MODULES:
+        importlib.import_module(module)
     for entry in entry_points(group=ENTRY_POINT_GROUP):
         try:
             entry.load()

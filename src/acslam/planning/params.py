@@ -1,8 +1,8 @@
 """Parameters of the global and local planner plugins, apart from their code.
 
 Validating a scenario needs only these models, so it imports no algorithm (and none of
-GTSAM, numba or SciPy); :mod:`acslam.pipeline.builtins` names the implementation each
-belongs to.
+GTSAM, numba or SciPy): each model is declared to its registry with the implementation,
+which is imported when the plugin is first built.
 """
 
 from __future__ import annotations
@@ -12,8 +12,10 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from acslam.config import NonNegativeFloat, PositiveFloat, StageParams
+from acslam.pipeline.registry import GLOBAL_PLANNERS, LOCAL_PLANNERS
 
 
+@GLOBAL_PLANNERS.declare("acslam.planning.astar:AstarPlanner")
 class AstarParams(StageParams):
     """The A* global planner (thesis §4.7)."""
 
@@ -27,6 +29,7 @@ class AstarParams(StageParams):
     shortcut: bool = True
 
 
+@LOCAL_PLANNERS.declare("acslam.planning.dwa:DynamicWindowPlanner")
 class DwaParams(StageParams):
     """DWA (eqs. 4.48-4.56): velocity samples and the weights of eq. 4.51."""
 
@@ -41,6 +44,7 @@ class DwaParams(StageParams):
     min_rollout_steps: Annotated[int, Field(ge=2)] = 10
 
 
+@LOCAL_PLANNERS.declare("acslam.planning.fgp:FactorGraphPlanner")
 class FgpParams(StageParams):
     """The joint factor-graph planner (eqs. 4.59-4.71).
 
