@@ -100,6 +100,83 @@ def fault_options(command: Callable) -> Callable:
     )(command)
 
 
+class TeamParam(click.ParamType):
+    """``--robots`` of the served commands: a count, or the robots' ROS 2 namespaces."""
+
+    name = "N|NS,NS,..."
+
+    def convert(self, value: object, param: click.Parameter | None, ctx: click.Context | None):
+        if isinstance(value, (int, list)):
+            return value
+        text = str(value).strip()
+        if text.isdigit() and int(text) >= 1:
+            return int(text)
+        names = [name.strip().strip("/") for name in text.split(",")]
+        if not all(names) or len(set(names)) != len(names):
+            self.fail(f"expected a count or distinct namespaces a,b,c; got {text!r}", param, ctx)
+        return names
+
+
+def team_option(command: Callable) -> Callable:
+    return click.option(
+        "--robots",
+        "team",
+        type=TeamParam(),
+        default=None,
+        help="Number of robots (the first N start poses), or with --ros2 their namespaces, "
+        "e.g. robot1,robot2 [default: the scenario's robots, namespaces robot_0, ...].",
+    )(command)
+
+
+def ros2_options(command: Callable) -> Callable:
+    """--ros2 and how acslam appears on a ROS 2 network."""
+    for option in reversed(
+        [
+            click.option("--ros2", is_flag=True, help="Speak ROS 2 (rmw_zenoh's wire format)."),
+            click.option(
+                "--distro",
+                type=click.Choice(["humble", "jazzy", "kilted", "rolling"]),
+                default="jazzy",
+                show_default=True,
+                help="ROS 2 distribution of the robots: type hashes (Humble has none) and "
+                "message types.",
+            ),
+            click.option(
+                "--attachment",
+                type=click.Choice(["positional", "legacy"]),
+                default="positional",
+                show_default=True,
+                help="rmw_zenoh's attachment format: positional since rmw_zenoh 0.2.4 "
+                "(Jazzy, 2025-04) and 0.1.2 (Humble), legacy key/value before.",
+            ),
+            click.option(
+                "--domain-id",
+                type=click.IntRange(0, 232),
+                default=0,
+                show_default=True,
+                help="ROS_DOMAIN_ID of the robots.",
+            ),
+        ]
+    ):
+        command = option(command)
+    return command
+
+
+def _ros2(distro: str, attachment: str, domain_id: int, bridge: bool = False):
+    from acslam.ros2.node import Ros2Options
+
+    return Ros2Options(domain_id=domain_id, distro=distro, attachment=attachment, bridge=bridge)
+
+
+def _team(team: int | list[str] | None, ros2: bool) -> tuple[int | None, list[str] | None]:
+    """The robot count and, for ROS 2, the namespaces ``--robots`` names."""
+    if isinstance(team, list):
+        if not ros2:
+            raise click.UsageError("--robots: namespaces need --ros2")
+        return len(team), team
+    return team, None
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="acslam")
 def cli() -> None:
@@ -173,6 +250,7 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     "in real time.",
 )
 @fault_options
+@ros2_options
 @click.option(
     "--viz",
     type=click.Choice(["none", "rerun"]),
@@ -186,6 +264,13 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     default=None,
     help="Write the Rerun recording to this .rrd file [default: spawn a live viewer].",
 )
+@click.option(
+    "--record",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Record the run as a ROS 2 bag (rosbag2, MCAP storage) in this .mcap file: per "
+    "robot scan, odom, landmarks, tf, tf_static, cmd_vel and ground_truth, and /map.",
+)
 def run_command(
     scenario_name: str,
     robots: int | None,
@@ -197,8 +282,13 @@ def run_command(
     distributed: bool,
     drop_rate: float,
     latency_ms: float,
+    ros2: bool,
+    distro: str,
+    attachment: str,
+    domain_id: int,
     viz: str,
     viz_out: Path | None,
+    record: Path | None,
 ) -> None:
     """Explore a scenario with the full server in the loop and write the run folder."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -208,8 +298,16 @@ def run_command(
 
     if (drop_rate or latency_ms) and not distributed:
         raise click.UsageError("--drop-rate and --latency-ms need --distributed")
+    if ros2 and not distributed:
+        raise click.UsageError("--ros2 needs --distributed")
+    if ros2 and (drop_rate or latency_ms):
+        raise click.UsageError("--drop-rate and --latency-ms are not available with --ros2")
     if viz_out is not None and viz == "none":
         raise click.UsageError("--viz-out needs --viz rerun")
+    if record is not None and distributed:
+        raise click.UsageError("--record records in-process runs only (not --distributed)")
+    if record is not None and record.suffix != ".mcap":
+        raise click.UsageError("--record: the bag is written as an .mcap file")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     scenario = scenario.with_algorithms(local_planner=planner, allocator=allocator)
     if out_dir is None:
@@ -240,8 +338,12 @@ def run_command(
                 frontiers=len(snapshot.frontier_cells),
             )
 
-        with _visualizer(viz, viz_out, scenario) as on_step:
-            hooks = RunHooks(on_progress=show, on_step=on_step)
+        with _visualizer(viz, viz_out, scenario) as on_step, _recorder(record, scenario) as bag:
+            hooks = RunHooks(
+                on_progress=show,
+                on_step=_each_step(on_step, None if bag is None else bag.on_step),
+                on_finish=None if bag is None else bag.on_finish,
+            )
             if distributed:
                 from acslam.distributed.launch import run_distributed
                 from acslam.distributed.robot_node import RobotOptions
@@ -249,8 +351,8 @@ def run_command(
 
                 options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
                 metrics = run_distributed(
-                    scenario, scenario_name, out_dir, limit_s,
-                    robot_options=options, hooks=hooks,
+                    scenario, scenario_name, out_dir, limit_s, robot_options=options,
+                    ros2=_ros2(distro, attachment, domain_id) if ros2 else None, hooks=hooks,
                 )  # fmt: skip
             else:
                 metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
@@ -273,6 +375,35 @@ def _visualizer(viz: str, viz_out: Path | None, scenario: Scenario) -> Iterator:
         logger.close()
 
 
+@contextmanager
+def _recorder(record: Path | None, scenario: Scenario) -> Iterator:
+    """The bag recorder ``--record`` asks for (None without it); a run that stops on an
+    exception still leaves what it recorded."""
+    if record is None:
+        yield None
+        return
+    from acslam.ros2.record import BagRecorder
+
+    recorder = BagRecorder(record, scenario)
+    try:
+        yield recorder
+    finally:
+        recorder.close()
+
+
+def _each_step(*hooks: Callable | None) -> Callable | None:
+    """One step hook that calls each given one in turn (None if none is given)."""
+    given = [hook for hook in hooks if hook is not None]
+    if len(given) <= 1:
+        return given[0] if given else None
+
+    def each(snapshot, messages) -> None:
+        for hook in given:
+            hook(snapshot, messages)
+
+    return each
+
+
 def _print_summary(metrics: dict, reachable_m2: float) -> None:
     status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
     table = Table(
@@ -288,15 +419,14 @@ def _print_summary(metrics: dict, reachable_m2: float) -> None:
         "area [m²]",
     ):
         table.add_column(column, justify="right")
-    for name, loc in metrics["localization"].items():
-        table.add_row(
-            name,
-            f"{metrics['timing']['per_robot_s'][name]:.1f}",
-            f"{loc['rmse_m']:.3f}",
-            f"{loc['final_dist_m']:.3f}",
-            f"{loc['rmse_yaw_rad']:.3f}",
-            f"{metrics['coverage'][name]['area_m2']:.1f}",
+    for name, time_s in metrics["timing"]["per_robot_s"].items():
+        loc = metrics["localization"].get(name)  # none without ground truth (real robots)
+        errors = (
+            ["-"] * 3
+            if loc is None
+            else [f"{loc[key]:.3f}" for key in ("rmse_m", "final_dist_m", "rmse_yaw_rad")]
         )
+        table.add_row(name, f"{time_s:.1f}", *errors, f"{metrics['coverage'][name]['area_m2']:.1f}")
     _console.print(table)
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     _console.print(
@@ -323,22 +453,28 @@ def slam_group() -> None:
     """Replay real recordings through the localizer stage and score them."""
 
 
-def algorithms_option(preset: str) -> Callable:
-    """--algorithms FILE: the replay's stages and parameters instead of a built-in preset."""
+def algorithms_option(preset: str | None) -> Callable:
+    """--algorithms FILE|PRESET: the replay's stages and parameters instead of its default
+    (a built-in ``preset``, or with None the simulated robots')."""
+    default = (
+        f"the built-in {preset} preset, src/acslam/replay/presets/{preset}.yaml"
+        if preset
+        else "the simulated robots' algorithms, a scenario's defaults"
+    )
     return click.option(
         "--algorithms",
         "algorithms_file",
         type=click.Path(dir_okay=False, path_type=Path),
         default=None,
-        help=f"An algorithms YAML (the `algorithms` section of a scenario) [default: the "
-        f"built-in {preset} preset, src/acslam/replay/presets/{preset}.yaml].",
+        help="An algorithms YAML (the `algorithms` section of a scenario) or a built-in "
+        f"preset's name (carmen, mrclam) [default: {default}].",
     )
 
 
-def _algorithms(path: Path | None):
-    from acslam.config import load_algorithms
+def _algorithms(name_or_path: Path | None):
+    from acslam.replay import algorithms_config
 
-    return None if path is None else load_algorithms(path)
+    return None if name_or_path is None else algorithms_config(name_or_path)
 
 
 @slam_group.command("mrclam")
@@ -412,6 +548,112 @@ def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) 
         f"({metrics['loop_closures']['rejected']} rejected), {skipped} malformed lines skipped; "
         f"{metrics['log_duration_s']:.0f} s of log in {metrics['wall_time_s']:.0f} s "
         f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
+    )
+
+
+def _namespaces(ctx: click.Context, param: click.Parameter, value: str | None) -> list[str]:
+    """--robots ns1,ns2 of `slam rosbag`: distinct namespaces, or the root ("")."""
+    if value is None:
+        return [""]
+    names = [name.strip().strip("/") for name in value.split(",")]
+    if not all(names) or len(set(names)) != len(names):
+        raise click.BadParameter(f"expected distinct namespaces a,b,c; got {value!r}")
+    return names
+
+
+@slam_group.command("rosbag")
+@click.argument("bag", type=click.Path(path_type=Path))
+@out_option(
+    "Folder for trajectory.tum (trajectory_<ns>.tum per robot), map.yaml/.pgm/.png, "
+    "odometry_vs_slam.png, metrics.json.",
+    required=True,
+)
+@click.option(
+    "--robots",
+    "namespaces",
+    metavar="NS,NS,...",
+    callback=_namespaces,
+    default=None,
+    help="The robots' namespaces, e.g. robot1,robot2: topics /<ns>/scan, /<ns>/odom, "
+    "/<ns>/tf_static or /tf_static [default: one robot, topics at the root].",
+)
+@click.option("--scan-topic", default="scan", show_default=True, help="LaserScan topic.")
+@click.option(
+    "--odom-topic",
+    default="odom",
+    show_default=True,
+    help="Odometry topic (relative names resolve under each namespace); a robot without "
+    "one gets scan-matching odometry.",
+)
+@click.option(
+    "--finish/--no-finish",
+    default=True,
+    show_default=True,
+    help="End the data with a last loop-closure search and settling; without, the estimate "
+    "stays where a live run's was when it stopped (a bag of `acslam run --record` then "
+    "replays to the run's own trajectories).",
+)
+@algorithms_option(None)
+def slam_rosbag_command(
+    bag: Path,
+    out_dir: Path,
+    namespaces: list[str],
+    scan_topic: str,
+    odom_topic: str,
+    finish: bool,
+    algorithms_file: Path | None,
+) -> None:
+    """Replay a ROS bag (rosbag2 .mcap/.db3 or its folder, or ROS 1 .bag) through SLAM and
+    mapping.
+
+    Each robot's laser mount comes from tf_static, its start pose from its first odometry
+    pose (its odom frame taken as the map frame); one TUM trajectory of the base per robot.
+    """
+    from acslam.replay.rosbag import run_rosbag
+    from acslam.ros2.source import Ros2Topics
+
+    metrics = run_rosbag(
+        bag,
+        out_dir,
+        namespaces=namespaces,
+        topics=Ros2Topics(scan=scan_topic, odom=odom_topic),
+        algorithms=_algorithms(algorithms_file),
+        finish=finish,
+    )
+    robots = ", ".join(
+        f"{name}: {robot['scans_used']} scans, {robot['keyframes']} keyframes"
+        + (" (scan-matching odometry)" if robot["odometry"] == "scan matching" else "")
+        for name, robot in metrics["robots"].items()
+    )
+    click.echo(
+        f"{robots}; {metrics['loop_closures']['accepted']} loop closures "
+        f"({metrics['loop_closures']['rejected']} rejected); "
+        f"{metrics['log_duration_s']:.0f} s of bag in {metrics['wall_time_s']:.0f} s "
+        f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
+    )
+
+
+@cli.group("convert")
+def convert_group() -> None:
+    """Write recordings as ROS 2 bags (rosbag2 in MCAP storage)."""
+
+
+@convert_group.command("carmen")
+@click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("out", type=click.Path(dir_okay=False, path_type=Path))
+def convert_carmen_command(log: Path, out: Path) -> None:
+    """Write a CARMEN log's odometry and laser as a rosbag2 file OUT (.mcap): /scan
+    (LaserScan), /odom (Odometry odom -> base_link), /tf and /tf_static (the laser mount).
+
+    At a FLASER stamp the odometry is the base pose the line's laser pose implies, so
+    `acslam slam rosbag OUT --algorithms carmen` sees the laser poses `slam carmen` sees.
+    """
+    from acslam.ros2.carmen_bag import convert_carmen
+
+    written = convert_carmen(log, out)
+    click.echo(
+        f"{written['scans']} scans, {written['odometry_samples']} odometry samples, "
+        f"{written['duration_s']:.0f} s -> {out}"
     )
 
 
@@ -526,12 +768,19 @@ def bench_command(out_dir: Path, quick: bool) -> None:
 
 @cli.command("serve")
 @scenario_option
-@robots_option
+@team_option
 @seed_option
 @click.option(
     "--listen",
-    required=True,
-    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (tcp/127.0.0.1:PORT locally).",
+    default=None,
+    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (tcp/127.0.0.1:PORT locally); "
+    "with --ros2 the server is then the router the robots connect to.",
+)
+@click.option(
+    "--connect",
+    multiple=True,
+    help="--ros2: the robots' Zenoh router, tcp/HOST:7447 (all robots on one router), or "
+    "NS=tcp/HOST:7447 once per robot router. Repeatable.",
 )
 @out_option("Run folder [default: runs/<scenario>-<time>-serve].")
 @max_time_option(
@@ -543,39 +792,122 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     type=click.FloatRange(min=0, min_open=True),
     default=2.0,
     show_default=True,
-    help="Seconds without a heartbeat before a robot is declared lost.",
+    help="Seconds without a heartbeat (with --ros2: without odometry) before a robot is "
+    "declared lost.",
+)
+@ros2_options
+@click.option(
+    "--bridge",
+    is_flag=True,
+    help="--ros2: robots that stay on DDS, through zenoh-bridge-ros2dds (its keys, no attachment).",
+)
+@click.option("--scan-topic", default="scan", show_default=True, help="--ros2: LaserScan topic.")
+@click.option("--odom-topic", default="odom", show_default=True, help="--ros2: Odometry topic.")
+@click.option(
+    "--tf-static-topic",
+    default="tf_static",
+    show_default=True,
+    help="--ros2: static transforms (/tf_static for a global one with prefixed frames).",
+)
+@click.option(
+    "--cmd-vel-type",
+    type=click.Choice(["auto", "twist", "twist-stamped"]),
+    default="auto",
+    show_default=True,
+    help="--ros2: cmd_vel as geometry_msgs/Twist or TwistStamped (auto: Twist on Humble, "
+    "TwistStamped from Jazzy on).",
+)
+@click.option(
+    "--laser-mount",
+    type=(float, float, float),
+    default=None,
+    help="--ros2: the laser's pose X Y YAW (m, m, rad) in the odometry's base frame, instead "
+    "of reading it from tf_static.",
+)
+@click.option(
+    "--global-tf",
+    is_flag=True,
+    help="--ros2: publish map -> <ns>/odom on /tf instead of map -> odom on /<ns>/tf.",
 )
 def serve_command(
     scenario_name: str,
-    robots: int | None,
+    team: int | list[str] | None,
     seed: int | None,
-    listen: str,
+    listen: str | None,
+    connect: tuple[str, ...],
     out_dir: Path | None,
     max_time_s: float | None,
     heartbeat_timeout_s: float,
+    ros2: bool,
+    distro: str,
+    attachment: str,
+    domain_id: int,
+    bridge: bool,
+    scan_topic: str,
+    odom_topic: str,
+    tf_static_topic: str,
+    cmd_vel_type: str,
+    laser_mount: tuple[float, float, float] | None,
+    global_tf: bool,
 ) -> None:
-    """Run the server in wall-clock time for robots connecting over Zenoh."""
-    from acslam.distributed.server_node import ServeOptions, serve
+    """Run the server in wall-clock time for robots connecting over Zenoh (acslam's own
+    protocol, or with --ros2 ROS 2 robots through rmw_zenoh or the DDS bridge)."""
     from acslam.scenario import load_scenario
 
+    robots, namespaces = _team(team, ros2)
+    if not ros2 and (connect or bridge):
+        raise click.UsageError("--connect and --bridge need --ros2")
+    if not ros2 and listen is None:
+        raise click.UsageError("--listen is required (or --ros2 with --connect)")
+    if ros2 and listen is None and not connect:
+        raise click.UsageError("--ros2 needs --connect (the robots' router) or --listen")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
-    options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
-    click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
-    metrics = serve(scenario, listen, out_dir, limit_s, options=options)
+    if ros2:
+        from acslam.ros2.launch import default_namespaces
+        from acslam.ros2.serve import Ros2ServeOptions, serve_ros2
+        from acslam.ros2.source import Ros2Topics
+
+        namespaces = namespaces or default_namespaces(scenario.robot_count)
+        options = Ros2ServeOptions(
+            tuple(namespaces),
+            _ros2(distro, attachment, domain_id, bridge),
+            connect=connect,
+            listen=listen,
+            topics=Ros2Topics(
+                scan=scan_topic,
+                odom=odom_topic,
+                tf_static=tf_static_topic,
+                cmd_vel_stamped=None if cmd_vel_type == "auto" else cmd_vel_type == "twist-stamped",
+            ),
+            global_tf=global_tf,
+            laser_mount=laser_mount,
+            lost_after_s=heartbeat_timeout_s,
+        )
+        where = listen or ", ".join(connect)
+        click.echo(f"serving ROS 2 robots {', '.join(namespaces)} via {where} -> {out_dir}")
+        metrics = serve_ros2(scenario, out_dir, limit_s, options)
+    else:
+        from acslam.distributed.server_node import ServeOptions, serve
+
+        options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
+        click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
+        metrics = serve(scenario, listen, out_dir, limit_s, options=options)
     _print_summary(metrics, scenario.reachable_area_m2)
 
 
 @cli.command("robot")
 @scenario_option
-@robots_option
+@team_option
 @seed_option
 @click.option("--id", "robot_id", type=click.IntRange(min=0), required=True, help="Robot index.")
 @click.option(
-    "--connect", required=True, help="The server's Zenoh endpoint, e.g. tcp/10.0.0.5:7447."
+    "--connect",
+    required=True,
+    help="The server's Zenoh endpoint, e.g. tcp/10.0.0.5:7447 (with --ros2: the router's).",
 )
 @max_time_option("Seconds before the robot stops [default: the scenario's sim.max_time_s].")
 @fault_options
@@ -593,9 +925,10 @@ def serve_command(
     default=None,
     help="Write this robot's ground-truth log (.npz) here when it stops.",
 )
+@ros2_options
 def robot_command(
     scenario_name: str,
-    robots: int | None,
+    team: int | list[str] | None,
     seed: int | None,
     robot_id: int,
     connect: str,
@@ -604,12 +937,20 @@ def robot_command(
     latency_ms: float,
     command_timeout_s: float,
     truth_out: Path | None,
+    ros2: bool,
+    distro: str,
+    attachment: str,
+    domain_id: int,
 ) -> None:
-    """Run one simulated robot in real time against a server over Zenoh."""
-    from acslam.distributed.robot_node import RobotOptions, run_robot
+    """Run one simulated robot in real time against a server over Zenoh (with --ros2:
+    publishing its namespace's scan, odom, tf and landmarks, driven by cmd_vel)."""
+    from acslam.distributed.robot_node import RobotOptions
     from acslam.scenario import load_scenario
     from acslam.transport.zenoh_link import FaultInjection
 
+    robots, namespaces = _team(team, ros2)
+    if ros2 and (drop_rate or latency_ms):
+        raise click.UsageError("--drop-rate and --latency-ms are not available with --ros2")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
     options = RobotOptions(
@@ -617,7 +958,23 @@ def robot_command(
         command_timeout_s=command_timeout_s,
         truth_out=truth_out,
     )
-    reason = run_robot(scenario, robot_id, connect, limit_s, options)
+    if ros2:
+        from acslam.ros2.launch import default_namespaces
+        from acslam.ros2.robot import run_ros2_robot
+
+        reason = run_ros2_robot(
+            scenario,
+            robot_id,
+            namespaces or default_namespaces(scenario.robot_count),
+            [connect],
+            limit_s,
+            options=options,
+            ros2=_ros2(distro, attachment, domain_id),
+        )
+    else:
+        from acslam.distributed.robot_node import run_robot
+
+        reason = run_robot(scenario, robot_id, connect, limit_s, options)
     click.echo(f"robot_{robot_id}: stopped ({reason})")
 
 

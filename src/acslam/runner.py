@@ -51,6 +51,9 @@ ProgressHook = Callable[[Snapshot, float, float], None]
 """Called with the snapshot, the simulated time and the explored m^2 once per second."""
 StepHook = Callable[[Snapshot, list[RobotMessage]], None]
 """Called with every step's snapshot and that step's messages (live views)."""
+FinishHook = Callable[["TruthLog"], None]
+"""Called with the ground truth (which no hook sees during the run) once an in-process run
+has written its folder."""
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,7 @@ class RunHooks:
 
     on_progress: ProgressHook | None = None
     on_step: StepHook | None = None
+    on_finish: FinishHook | None = None
 
 
 NO_HOOKS = RunHooks()
@@ -66,6 +70,15 @@ NO_HOOKS = RunHooks()
 
 def robot_name(robot_id: int) -> str:
     return f"robot_{robot_id}"
+
+
+def start_run_folder(out_dir: Path, scenario: Scenario) -> Path:
+    """Create the run folder and write its ``config.yaml`` first, before anything can
+    fail: whatever happens next, the folder says what was run."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
+    return out_dir
 
 
 def resolved_config(scenario: Scenario) -> dict:
@@ -121,9 +134,7 @@ def run_exploration(
     hooks: RunHooks = NO_HOOKS,
 ) -> dict:
     """Explore ``scenario`` until done or ``max_time_s``; returns the metrics written."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
+    out_dir = start_run_folder(out_dir, scenario)
     config = scenario.config
     sim = scenario.simulator()
     server = Server(config, scenario.starts, scenario.world.spec)
@@ -134,9 +145,12 @@ def run_exploration(
         server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
     )
     truth = TruthLog.of_simulator(sim)
-    return finish_run(
+    metrics = finish_run(
         out_dir, scenario, log, truth, reason=reason, wall_time_s=wall_time_s, time_s=sim.time_s
     )
+    if hooks.on_finish is not None:
+        hooks.on_finish(truth)
+    return metrics
 
 
 def failure_reason(exc: Exception, out_dir: Path) -> str:
@@ -180,11 +194,11 @@ class RunLog:
 
 @dataclass(frozen=True)
 class TruthLog:
-    """The ground truth a run is scored against: ``[t, x, y, theta]`` rows per robot and
-    (N, 2) contact counts (walls, robots)."""
+    """The ground truth a run is scored against: ``[t, x, y, theta]`` rows per robot (none
+    for a real robot) and (N, 2) contact counts (walls, robots), None where unknown."""
 
     trajectories: list[np.ndarray]
-    collisions: np.ndarray
+    collisions: np.ndarray | None
 
     @classmethod
     def of_simulator(cls, sim: Simulator) -> TruthLog:
@@ -268,16 +282,17 @@ def _metrics(
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
-        localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
+        if len(true) >= 2:  # a real robot has no ground truth to be scored against
+            localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
     cell_area_m2 = scenario.world.spec.resolution_m**2
     known = record.estimated_values != UNKNOWN
     reachable = record.reachable
-    if count > 1:
+    if count > 1 and all(len(true) for true in record.true_trajectories):
         true_xy = _common_clock_xy(record.true_trajectories)
         gaps = np.linalg.norm(true_xy[:, :, None] - true_xy[:, None], axis=-1)
-        min_distance = float(gaps[:, ~np.eye(count, dtype=bool)].min())
+        min_distance: float | None = float(gaps[:, ~np.eye(count, dtype=bool)].min())
     else:
-        min_distance = math.inf
+        min_distance = math.inf if count == 1 else None
     collisions = truth.collisions
     stages_ms = {
         str(stage): 1000 * samples[:, 1]
@@ -306,8 +321,8 @@ def _metrics(
         },
         "mapping": confusion_rates(record.true_occupied, record.estimated_values),
         "safety": {
-            "obstacle_collisions": int(collisions[:, 0].sum()),
-            "robot_collisions": int(collisions[:, 1].sum()),
+            "obstacle_collisions": None if collisions is None else int(collisions[:, 0].sum()),
+            "robot_collisions": None if collisions is None else int(collisions[:, 1].sum()),
             "min_robot_distance_m": min_distance,
             "stuck_events": int(sum(last.stuck_events)),
         },
@@ -345,7 +360,10 @@ def _write_outputs(out_dir: Path, scenario: Scenario, record: RunRecord) -> None
         write_tum(
             out_dir / "trajectories" / f"{robot_name(i)}.estimated.tum", est[:, 0], est[:, 1:]
         )
-        write_tum(
-            out_dir / "trajectories" / f"{robot_name(i)}.groundtruth.tum", true[:, 0], true[:, 1:]
-        )
+        if len(true):
+            write_tum(
+                out_dir / "trajectories" / f"{robot_name(i)}.groundtruth.tum",
+                true[:, 0],
+                true[:, 1:],
+            )
     record.save(out_dir / "run.npz")

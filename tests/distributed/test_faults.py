@@ -55,7 +55,7 @@ class Watcher:
     with the monotonic time they arrived."""
 
     def __init__(self, endpoint: str) -> None:
-        self.session = open_session(connect=endpoint)
+        self.session = open_session(connect=[endpoint])
         self.status: list[tuple[float, StatusBeacon]] = []
         self.poses: dict[int, list[tuple[float, np.ndarray]]] = defaultdict(list)
         self._subscribers = [

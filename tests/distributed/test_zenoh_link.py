@@ -29,7 +29,7 @@ from acslam.transport.zenoh_link import (
 def link() -> Iterator[tuple]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     server_session = open_session(listen=endpoint)
-    robot_session = open_session(connect=endpoint)
+    robot_session = open_session(connect=[endpoint])
     server = ZenohServerEndpoint(server_session, robot_count=2)
     time.sleep(0.5)  # let the sessions connect and the subscriptions propagate
     yield server, robot_session

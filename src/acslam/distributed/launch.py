@@ -10,13 +10,19 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from acslam.distributed.robot_node import RobotOptions
 from acslam.distributed.server_node import serve
 from acslam.runner import NO_HOOKS, RunHooks
 from acslam.scenario import Scenario
+
+if TYPE_CHECKING:
+    from acslam.ros2.node import Ros2Options
 
 ROBOT_EXIT_TIMEOUT_S = 15.0
 
@@ -74,30 +80,54 @@ def run_distributed(
     max_time_s: float,
     *,
     robot_options: RobotOptions | None = None,
+    ros2: Ros2Options | None = None,
     hooks: RunHooks = NO_HOOKS,
 ) -> dict:
-    """Start N robot processes, serve them until the run ends, collect; returns metrics."""
-    robot_options = robot_options or RobotOptions()
+    """Start N robot processes, serve them until the run ends, collect; returns metrics.
+    With ``ros2`` the robots and the server speak ROS 2 (:mod:`acslam.ros2.launch`)."""
     out_dir = Path(out_dir)
-    (out_dir / "logs").mkdir(parents=True, exist_ok=True)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
+    if ros2 is not None:
+        from acslam.ros2.launch import serve_simulated_team
+
+        return serve_simulated_team(
+            scenario, scenario_arg, out_dir, max_time_s, endpoint, ros2, hooks
+        )
+    robot_options = robot_options or RobotOptions()
+    commands = [
+        robot_command(
+            scenario_arg,
+            scenario.robot_count,
+            scenario.config.seed,
+            i,
+            endpoint,
+            max_time_s + 30.0,
+            replace(robot_options, truth_out=truth_path(out_dir, i)),
+        )
+        for i in range(scenario.robot_count)
+    ]
+    with robot_processes(commands, out_dir):
+        return serve(scenario, endpoint, out_dir, max_time_s, hooks=hooks)
+
+
+def truth_path(out_dir: Path, robot_id: int) -> Path:
+    """Where robot node ``robot_id`` writes its ground-truth log."""
+    return Path(out_dir) / "truth" / f"robot_{robot_id}.npz"
+
+
+@contextmanager
+def robot_processes(commands: list[list[str]], out_dir: Path) -> Iterator[list[subprocess.Popen]]:
+    """One process per robot command, output to ``out_dir/logs/robot_<i>.log``. If the
+    server fails or is interrupted the robots are killed; otherwise they get
+    ``ROBOT_EXIT_TIMEOUT_S`` to end on their own."""
+    (Path(out_dir) / "logs").mkdir(parents=True, exist_ok=True)
     processes = []
     try:
-        for i in range(scenario.robot_count):
-            options = replace(robot_options, truth_out=out_dir / "truth" / f"robot_{i}.npz")
-            command = robot_command(
-                scenario_arg,
-                scenario.robot_count,
-                scenario.config.seed,
-                i,
-                endpoint,
-                max_time_s + 30.0,
-                options,
-            )
-            with (out_dir / "logs" / f"robot_{i}.log").open("w") as log:
+        for i, command in enumerate(commands):
+            with (Path(out_dir) / "logs" / f"robot_{i}.log").open("w") as log:
                 processes.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT))
-        return serve(scenario, endpoint, out_dir, max_time_s, hooks=hooks)
-    except BaseException:  # the server failed or was interrupted: the robots go with it
+        yield processes
+    except BaseException:
         for process in processes:
             process.kill()
         raise

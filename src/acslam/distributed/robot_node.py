@@ -20,17 +20,19 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from acslam.errors import TransportError
-from acslam.messages import VelocityCommand
+from acslam.messages import RobotMessage, VelocityCommand
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
-from acslam.transport.codec import TruthBatch
+from acslam.transport.codec import StatusBeacon, TruthBatch
 from acslam.transport.zenoh_link import FaultInjection, ZenohRobotEndpoint, open_session
 
 _FAULT_STREAM = 100  # spawn key of the fault-injection stream, apart from acslam.seeding's
@@ -48,6 +50,27 @@ class RobotOptions:
     truth_out: Path | None = None
 
 
+class RobotLink(Protocol):
+    """A robot's end of the network, as the agent uses it (the acslam protocol's
+    :class:`~acslam.transport.zenoh_link.ZenohRobotEndpoint`, or ROS 2 topics)."""
+
+    def publish(self, message: RobotMessage) -> None: ...
+
+    def flush(self) -> None: ...
+
+    def heartbeat(self, stamp: float) -> None: ...
+
+    def publish_truth(self, batch: TruthBatch) -> None: ...
+
+    def receive_commands(self) -> list[VelocityCommand]: ...
+
+    def status(self) -> tuple[float, StatusBeacon] | None: ...
+
+    def other_poses(self) -> dict[int, np.ndarray]: ...
+
+    def stats_summary(self) -> dict: ...
+
+
 def run_robot(
     scenario: Scenario, robot_id: int, connect: str, max_time_s: float, options: RobotOptions
 ) -> str:
@@ -62,25 +85,26 @@ def run_robot(
     fault_rng = np.random.default_rng(
         np.random.SeedSequence(entropy=config.seed, spawn_key=(_FAULT_STREAM, robot_id))
     )
-    session = open_session(connect=connect)
+    session = open_session(connect=[connect])
     try:
         link = ZenohRobotEndpoint(
             session, robot_id, scenario.starts[robot_id], options.faults, fault_rng
         )
         period_s = config.algorithms.planning.control_period_s
-        agent = _Agent(sim, link, robot_id, options, config.sim.dt_s, period_s)
+        agent = RobotAgent(sim, link, robot_id, options, config.sim.dt_s, period_s)
         return agent.run(max_time_s)
     finally:
         session.close()
 
 
-class _Agent:
-    """The real-time loop of one robot node."""
+class RobotAgent:
+    """The real-time loop of one robot node; :attr:`stop` ends it from another thread or
+    a signal handler (reason ``terminated``), with its ground-truth log written."""
 
     def __init__(
         self,
         sim: Simulator,
-        link: ZenohRobotEndpoint,
+        link: RobotLink,
         robot_id: int,
         options: RobotOptions,
         dt_s: float,
@@ -96,10 +120,14 @@ class _Agent:
         self.truth_rows: list[tuple[float, float, float, float]] = [(0.0, *start)]
         self.sent_rows = 0
         self.stops = 0
+        self.stop = threading.Event()
 
-    def run(self, max_time_s: float) -> str:
+    def run(self, max_time_s: float, *, wait_for_server: bool = True) -> str:
+        """Drive until the server says the run is over, goes silent, :attr:`stop` is set
+        or ``max_time_s``; without ``wait_for_server`` (a ROS 2 robot) it starts at once,
+        standing still until commands come."""
         options, link = self.options, self.link
-        if not self._wait_for_server():
+        if wait_for_server and not self._wait_for_server():
             return self._finish("no server")
         dt_s = self.dt_s
         command = VelocityCommand(self.robot_id, 0.0, 0.0, 0.0)
@@ -107,6 +135,9 @@ class _Agent:
         started = last_command = last_status = next_beat = next_truth = time.monotonic()
         reason = "time limit"
         while self.sim.time_s < max_time_s:
+            if self.stop.is_set():
+                reason = "terminated"
+                break
             time.sleep(max(0.0, started + self.sim.time_s + dt_s - time.monotonic()))
             now = time.monotonic()
             received = link.receive_commands()

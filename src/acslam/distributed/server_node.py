@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from acslam.pipeline.server import Server
 from acslam.runner import (
@@ -31,9 +30,9 @@ from acslam.runner import (
     RunLog,
     TruthLog,
     finish_run,
-    resolved_config,
     robot_name,
     run_loop,
+    start_run_folder,
 )
 from acslam.scenario import Scenario
 from acslam.sources.zenoh import ZenohSource
@@ -64,9 +63,7 @@ def serve(
     the metrics written to ``out_dir``."""
     options = options or ServeOptions()
     session = open_session(listen=listen)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
+    out_dir = start_run_folder(out_dir, scenario)
     count = scenario.robot_count
     try:
         endpoint = ZenohServerEndpoint(session, count)

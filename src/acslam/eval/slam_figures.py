@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -48,28 +49,31 @@ def _grid_image(values: np.ndarray) -> np.ndarray:
 
 
 def _draw_map(
-    ax: plt.Axes, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str
+    ax: plt.Axes, values: np.ndarray, spec: GridSpec, tracks: Sequence[np.ndarray], title: str
 ) -> None:
     ax.imshow(
         _grid_image(values), cmap="gray", origin="lower", extent=spec.extent_m, vmin=0, vmax=1
     )
-    ax.plot(track[:, 0], track[:, 1], lw=0.3, color="tab:red", alpha=0.6)
+    for robot, track in enumerate(tracks):
+        ax.plot(track[:, 0], track[:, 1], lw=0.3, color=robot_colour(robot), alpha=0.6)
     ax.set(title=title, xlabel="x [m]", ylabel="y [m]")
 
 
-def plot_map(path: Path, values: np.ndarray, spec: GridSpec, track: np.ndarray, title: str) -> None:
-    """One occupancy map with a trajectory over it."""
+def plot_map(
+    path: Path, values: np.ndarray, spec: GridSpec, tracks: Sequence[np.ndarray], title: str
+) -> None:
+    """One occupancy map with each robot's trajectory ((N, 3)) over it."""
     fig, ax = plt.subplots(figsize=(9, 9))
-    _draw_map(ax, values, spec, track, title)
+    _draw_map(ax, values, spec, tracks, title)
     fig.savefig(path, dpi=200, bbox_inches="tight")
     plt.close(fig)
 
 
 def plot_map_panels(
     path: Path,
-    panels: list[tuple[np.ndarray, GridSpec, np.ndarray, str]],
+    panels: list[tuple[np.ndarray, GridSpec, Sequence[np.ndarray], str]],
 ) -> None:
-    """Maps side by side, each ``(values, spec, track, title)``."""
+    """Maps side by side, each ``(values, spec, tracks, title)``."""
     fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
     for ax, panel in zip(axes, panels, strict=True):
         _draw_map(ax, *panel)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.config import AlgorithmsConfig, RobotsConfig, load_algorithms
+from acslam.errors import ConfigError
 from acslam.messages import LandmarkObservations, RobotMessage
 from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import LOCALIZERS
@@ -29,7 +30,20 @@ from acslam.sources.recorded import STAMP_TOLERANCE_S, RecordedSource
 def preset(name: str) -> AlgorithmsConfig:
     """A built-in algorithms preset by name (``presets/<name>.yaml``)."""
     with resources.as_file(resources.files("acslam") / "replay" / "presets") as folder:
-        return load_algorithms(Path(folder) / f"{name}.yaml")
+        path = Path(folder) / f"{name}.yaml"
+        if not path.is_file():
+            names = ", ".join(sorted(p.stem for p in Path(folder).glob("*.yaml")))
+            raise ConfigError(name, "", f"no such algorithms preset; the built-in ones: {names}")
+        return load_algorithms(path)
+
+
+def algorithms_config(name_or_path: str | Path) -> AlgorithmsConfig:
+    """A built-in preset by name, or an algorithms YAML file (a ``.yaml``/``.yml`` name,
+    or any file that exists)."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        return load_algorithms(path)
+    return preset(str(name_or_path))
 
 
 @dataclass(frozen=True)
@@ -47,9 +61,12 @@ def localize(
     algorithms: AlgorithmsConfig,
     starts: dict[int, np.ndarray],
     start_s: float | None = None,
+    finish: bool = True,
 ) -> Replayed:
     """Play ``messages`` through the localizer stage ``algorithms`` names, from the
-    recording's first stamp ``start_s`` (default: the first message's).
+    recording's first stamp ``start_s`` (default: the first message's). With ``finish``
+    the localizer ends the data with a last loop search and a settled estimate; without,
+    the estimate is where a live server's would be when the run stopped.
 
     The robot filter uses the default robot size (a recording does not say it); it only
     matters when a scan sees another robot of the team.
@@ -71,5 +88,6 @@ def localize(
         scans += localized.scans
         landmarks += localized.landmarks
         source.advance()
-    localizer.finish()
+    if finish:
+        localizer.finish()
     return Replayed(localizer, scans, landmarks)

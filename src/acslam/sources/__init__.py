@@ -7,6 +7,8 @@ server's commands back; a recording ignores them.
 
 from __future__ import annotations
 
+import math
+import time
 from typing import Protocol
 
 from acslam.messages import RobotMessage
@@ -41,3 +43,26 @@ class DataSource(Protocol):
     def advance(self) -> None:
         """Let the robots run (or the recording play) until the next period."""
         ...
+
+
+class LiveSource:
+    """Base of the sources of robots on a network: the clock is the wall's, in seconds
+    since the source started, the robots never run out, and a step comes every control
+    period (a slow step skips a period instead of running late)."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self._started = time.monotonic()
+
+    @property
+    def time_s(self) -> float:
+        return time.monotonic() - self._started
+
+    @property
+    def finished(self) -> bool:
+        return False
+
+    def advance(self) -> None:
+        elapsed_s = self.time_s
+        period_s = self.period_s
+        time.sleep(max(0.0, period_s * math.floor(elapsed_s / period_s + 1) - elapsed_s))

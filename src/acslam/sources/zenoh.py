@@ -2,35 +2,26 @@
 
 from __future__ import annotations
 
-import math
 import time
 
 from acslam.messages import RobotMessage
 from acslam.pipeline.snapshot import Snapshot
+from acslam.sources import LiveSource
 from acslam.transport.codec import StatusBeacon
 from acslam.transport.zenoh_link import ZenohServerEndpoint
 
 
-class ZenohSource:
+class ZenohSource(LiveSource):
     """Messages as they arrive; a robot whose heartbeats stop for ``heartbeat_timeout_s``
     is reported lost once and ignored from then on."""
 
     def __init__(
         self, endpoint: ZenohServerEndpoint, period_s: float, heartbeat_timeout_s: float
     ) -> None:
+        super().__init__(period_s)
         self.endpoint = endpoint
-        self.period_s = period_s
         self.heartbeat_timeout_s = heartbeat_timeout_s
-        self._started = time.monotonic()
         self._lost: set[int] = set()
-
-    @property
-    def time_s(self) -> float:
-        return time.monotonic() - self._started
-
-    @property
-    def finished(self) -> bool:
-        return False
 
     def newly_lost(self) -> list[int]:
         wall = time.monotonic()
@@ -51,8 +42,3 @@ class ZenohSource:
         self.endpoint.send(snapshot.commands)
         status = StatusBeacon(snapshot.time_s, snapshot.finished, tuple(snapshot.lost))
         self.endpoint.publish_status(status)
-
-    def advance(self) -> None:
-        """Sleep to the next multiple of the control period (a slow step skips one)."""
-        elapsed = self.time_s
-        time.sleep(max(0.0, self.period_s * math.floor(elapsed / self.period_s + 1) - elapsed))

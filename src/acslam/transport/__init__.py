@@ -8,6 +8,8 @@ server side and the robot side see only these two protocols.
 
 from __future__ import annotations
 
+import threading
+import time
 from collections.abc import Iterable
 from typing import Protocol
 
@@ -35,3 +37,30 @@ class ServerEndpoint(Protocol):
     def receive(self) -> list[RobotMessage]: ...
 
     def send(self, commands: Iterable[VelocityCommand]) -> None: ...
+
+
+class CommandInbox:
+    """The velocity commands a robot's link receives on a network thread, kept until the
+    robot's loop takes them; and when the last one came."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._commands: list[VelocityCommand] = []
+        self._last_s: float | None = None
+
+    def put(self, command: VelocityCommand) -> None:
+        with self._lock:
+            self._commands.append(command)
+            self._last_s = time.monotonic()
+
+    def take(self) -> list[VelocityCommand]:
+        """The commands since the last call, oldest first."""
+        with self._lock:
+            commands, self._commands = self._commands, []
+        return commands
+
+    @property
+    def last_s(self) -> float | None:
+        """Monotonic time the last command arrived (None before the first)."""
+        with self._lock:
+            return self._last_s

@@ -20,11 +20,12 @@ only the sensor topics the server localizes from.
 
 from __future__ import annotations
 
+import json
 import re
 import threading
 import time
 from collections import Counter, defaultdict, deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -40,7 +41,7 @@ from acslam.messages import (
     RobotMessage,
     VelocityCommand,
 )
-from acslam.transport import STATUS_KEY, robot_key
+from acslam.transport import STATUS_KEY, CommandInbox, robot_key
 from acslam.transport.codec import (
     CodecError,
     Heartbeat,
@@ -56,25 +57,47 @@ _ROBOT_KEY = re.compile(r"^acslam/robot_(\d+)/([a-z_]+)$")
 _UPLINK = ("odom", "scan", "landmarks", "heartbeat", "truth")
 
 
-def open_session(listen: str | None = None, connect: str | None = None) -> zenoh.Session:
-    """A Zenoh peer listening on and/or connecting to ``tcp/HOST:PORT`` endpoints.
-
-    Multicast scouting is off: the endpoints given are the whole network, so two runs on
-    one machine never meet by accident.
+def open_session(
+    listen: str | None = None,
+    connect: Sequence[str] = (),
+    *,
+    mode: str = "peer",
+    connect_timeout_s: float | None = None,
+    timestamping: bool = False,
+) -> zenoh.Session:
+    """A Zenoh session (``peer``, ``client`` or ``router``) listening on and/or connecting
+    to ``tcp/HOST:PORT`` endpoints; a client waits up to ``connect_timeout_s`` for its
+    router. Multicast scouting is off: the endpoints given are the whole network, so two
+    runs on one machine never meet by accident.
     """
     config = zenoh.Config()
-    config.insert_json5("mode", '"peer"')
+    config.insert_json5("mode", f'"{mode}"')
     config.insert_json5("scouting/multicast/enabled", "false")
-    for option, endpoint in (("listen", listen), ("connect", connect)):
-        if endpoint is None:
-            continue
-        if not re.match(r"^(tcp|udp|quic|tls)/[^:]+:\d+$", endpoint):
-            raise TransportError(f"--{option}: expected tcp/HOST:PORT, got {endpoint!r}")
-        config.insert_json5(f"{option}/endpoints", f'["{endpoint}"]')
+    if timestamping:
+        config.insert_json5("timestamping/enabled", "true")
+    if connect_timeout_s is not None:
+        config.insert_json5("connect/timeout_ms", str(round(1000 * connect_timeout_s)))
+    for option, endpoints in (("listen", [listen] if listen else []), ("connect", connect)):
+        for endpoint in endpoints:
+            if not re.match(r"^(tcp|udp|quic|tls)/[^:]+:\d+$", endpoint):
+                raise TransportError(f"--{option}: expected tcp/HOST:PORT, got {endpoint!r}")
+        if endpoints:
+            config.insert_json5(f"{option}/endpoints", json.dumps(list(endpoints)))
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
         raise TransportError(f"--{'listen' if listen else 'connect'}: {exc}") from None
+
+
+def latency_percentiles_ms(latency_s: Mapping[str, list[float]]) -> dict[str, dict[str, float]]:
+    """Per topic, the p50 and p95 of latencies measured on arrival, in milliseconds."""
+    return {
+        topic: {
+            "p50_ms": 1000 * float(np.percentile(values, 50)),
+            "p95_ms": 1000 * float(np.percentile(values, 95)),
+        }
+        for topic, values in sorted(latency_s.items())
+    }
 
 
 @dataclass
@@ -102,17 +125,10 @@ class LinkStats:
                 "messages": self.messages[(robot, topic)],
                 "bytes_per_s": size / elapsed_s,
             }
-        latency = {
-            topic: {
-                "p50_ms": 1000 * float(np.percentile(values, 50)),
-                "p95_ms": 1000 * float(np.percentile(values, 95)),
-            }
-            for topic, values in sorted(self.latency_s.items())
-        }
         return {
             "elapsed_s": elapsed_s,
             "per_robot": dict(per_robot),
-            "latency": latency,
+            "latency": latency_percentiles_ms(self.latency_s),
             "dropped": dict(self.dropped),
         }
 
@@ -264,7 +280,7 @@ class ZenohRobotEndpoint:
         self._rng = rng
         self._pose = np.asarray(start_pose, dtype=float)
         self._lock = threading.Lock()
-        self._commands: list[VelocityCommand] = []
+        self._commands = CommandInbox()
         self._status: tuple[float, StatusBeacon] | None = None
         self._others: dict[int, np.ndarray] = {}
         self._delayed: deque[tuple[float, str, WireMessage]] = deque()
@@ -297,8 +313,7 @@ class ZenohRobotEndpoint:
     def _on_command(self, sample: zenoh.Sample) -> None:
         message = self._receive(sample, "cmd_vel")
         if isinstance(message, VelocityCommand) and message.robot_id == self.robot_id:
-            with self._lock:
-                self._commands.append(message)
+            self._commands.put(message)
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         message = self._receive(sample, "status")
@@ -355,9 +370,7 @@ class ZenohRobotEndpoint:
         self._put("truth", batch)
 
     def receive_commands(self) -> list[VelocityCommand]:
-        with self._lock:
-            commands, self._commands = self._commands, []
-        return commands
+        return self._commands.take()
 
     def status(self) -> tuple[float, StatusBeacon] | None:
         """Monotonic receive time and content of the server's last status, if any."""
