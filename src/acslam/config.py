@@ -17,7 +17,6 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -30,6 +29,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from acslam.errors import ConfigError
+from acslam.files import parse_yaml, read_text, read_yaml
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -569,7 +569,7 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
     """Validate already-loaded YAML data; relative file paths resolve against ``source``."""
     if not isinstance(data, dict):
         raise ConfigError(source, "", "a scenario must be a YAML mapping of sections")
-    config = _validated(ScenarioConfig, data, source)
+    config = validated(ScenarioConfig, data, source)
     world_file = getattr(config.world, "file", None)
     if world_file is not None and not world_file.is_absolute() and Path(source).is_file():
         resolved = (Path(source).parent / world_file).resolve()
@@ -579,9 +579,9 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
     return config
 
 
-def _validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str = "") -> Any:
-    """``model`` from loaded YAML data; the first problem becomes a ConfigError naming
-    ``source`` and the field path (under ``prefix``)."""
+def validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str = "") -> Any:
+    """``model`` from loaded YAML or JSON data; the first problem becomes a ConfigError
+    naming ``source`` and the field path (under ``prefix``)."""
     try:
         return model.model_validate(data)
     except ValidationError as exc:
@@ -593,35 +593,22 @@ def _validated(model: type[BaseModel], data: Any, source: str | Path, prefix: st
         raise ConfigError(source, field, message + more) from None
 
 
-def _parse_yaml(text: str, source: str | Path) -> Any:
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(source, "", f"invalid YAML{where}") from None
-
-
 def load_algorithms(path: str | Path) -> AlgorithmsConfig:
     """An ``algorithms`` section on its own (a replay preset): stages and their
     parameters, every field not given at its default."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(path, "", "algorithms file not found")
-    data = _parse_yaml(path.read_text(encoding="utf-8"), path)
+    data = read_yaml(path, "algorithms file")
     if not isinstance(data, dict):
         raise ConfigError(path, "", "an algorithms file must be a YAML mapping of sections")
-    return _validated(AlgorithmsConfig, data, path, "algorithms")
+    return validated(AlgorithmsConfig, data, path, "algorithms")
 
 
 def load_scenario_config(name_or_path: str | Path) -> tuple[ScenarioConfig, str]:
     """Load a scenario by built-in name or YAML path; returns it with its source label."""
     path = Path(name_or_path)
     if path.suffix in (".yaml", ".yml") or path.exists():
-        if not path.is_file():
-            raise ConfigError(path, "", "scenario file not found")
         source = str(path)
-        text = path.read_text(encoding="utf-8")
+        text = read_text(path, "scenario file")
     else:
         names = builtin_scenario_names()
         if str(name_or_path) not in names:
@@ -636,4 +623,4 @@ def load_scenario_config(name_or_path: str | Path) -> tuple[ScenarioConfig, str]
         text = (resources.files("acslam") / "scenarios" / f"{name_or_path}.yaml").read_text(
             encoding="utf-8"
         )
-    return parse_scenario(_parse_yaml(text, source), source), source
+    return parse_scenario(parse_yaml(text, source), source), source

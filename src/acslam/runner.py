@@ -13,7 +13,6 @@ so a failed or timed-out run keeps what it produced.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import traceback
@@ -23,7 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from acslam.errors import AcslamError
 from acslam.eval.metrics import (
@@ -33,6 +31,7 @@ from acslam.eval.metrics import (
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
+from acslam.files import write_json, write_text, write_yaml
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
@@ -77,7 +76,7 @@ def start_run_folder(out_dir: Path, scenario: Scenario) -> Path:
     fail: whatever happens next, the folder says what was run."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "config.yaml").write_text(yaml.safe_dump(resolved_config(scenario), sort_keys=False))
+    write_yaml(out_dir / "config.yaml", resolved_config(scenario))
     return out_dir
 
 
@@ -158,7 +157,7 @@ def failure_reason(exc: Exception, out_dir: Path) -> str:
     anything else is a bug, so its traceback goes to ``out_dir/error.txt``."""
     if isinstance(exc, AcslamError):
         return f"error: {exc}"
-    (out_dir / "error.txt").write_text(traceback.format_exc())
+    write_text(out_dir / "error.txt", traceback.format_exc())
     return f"error: {type(exc).__name__}: {exc}"
 
 
@@ -223,7 +222,7 @@ def finish_run(
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
     metrics.update(extra or {})
     _write_outputs(out_dir, scenario, record)
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
+    write_json(out_dir / "metrics.json", metrics)
     write_report(out_dir, record, metrics)
     return metrics
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.errors import DataError
+from acslam.files import atomic_path
 
 
 def write_tum(path: Path, stamps: np.ndarray, poses: np.ndarray) -> None:
@@ -22,7 +23,8 @@ def write_tum(path: Path, stamps: np.ndarray, poses: np.ndarray) -> None:
     table = np.column_stack(
         [stamps, poses[:, 0], poses[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)]
     )
-    np.savetxt(path, table, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
+    with atomic_path(path) as temporary:
+        np.savetxt(temporary, table, fmt="%.9f", header="timestamp tx ty tz qx qy qz qw")
 
 
 def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,6 @@ factor). ``--quick`` shrinks every problem so the whole set takes about a minute
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from collections.abc import Callable
@@ -18,6 +17,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from acslam import files
 from acslam.benchmarks.core import Figure
 
 GROUPS = ("server", "mapping", "scan matching", "exploration", "planning", "slam", "simulator")
@@ -86,7 +86,7 @@ def write_json(figures: list[Figure], out_dir: Path) -> Path:
         "machine": {"python": platform.python_version(), "processor": platform.processor()},
         "figures": [asdict(f) | {"ratio": f.ratio} for f in figures],
     }
-    path.write_text(json.dumps(data, indent=1, allow_nan=True))
+    files.write_json(path, data, indent=1)
     return path
 
 

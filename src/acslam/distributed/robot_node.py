@@ -19,7 +19,6 @@ sensor messages only.
 from __future__ import annotations
 
 import json
-import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -29,6 +28,7 @@ from typing import Protocol
 import numpy as np
 
 from acslam.errors import TransportError
+from acslam.files import atomic_path
 from acslam.messages import RobotMessage, VelocityCommand
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
@@ -197,14 +197,13 @@ class RobotAgent:
         path = self.options.truth_out
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            partial = path.with_suffix(".partial.npz")
-            np.savez(
-                partial,
-                trajectory=np.array(self.truth_rows),
-                collisions=self.sim.ground_truth.collisions[self.robot_id],
-                link=json.dumps(
-                    {"reason": reason, "stops": self.stops, **self.link.stats_summary()}
-                ),
-            )
-            os.replace(partial, path)
+            with atomic_path(path) as temporary:
+                np.savez(
+                    temporary,
+                    trajectory=np.array(self.truth_rows),
+                    collisions=self.sim.ground_truth.collisions[self.robot_id],
+                    link=json.dumps(
+                        {"reason": reason, "stops": self.stops, **self.link.stats_summary()}
+                    ),
+                )
         return reason

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import base64
 import html
-import json
 import math
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
@@ -18,7 +17,8 @@ import numpy as np
 
 from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
-from acslam.eval.plotting import plt
+from acslam.eval.plotting import plt, save_figure
+from acslam.files import atomic_path, read_json, write_text
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 
 # Thesis Fig. 5.12: green TP, white TN, blue FP, red FN (grey: not mapped).
@@ -72,7 +72,8 @@ class RunRecord:
                     arrays[f"{f.name}.{i}"] = item
             else:
                 arrays[f.name] = value
-        np.savez_compressed(path, **arrays)
+        with atomic_path(path) as temporary:
+            np.savez_compressed(temporary, **arrays)
 
     @classmethod
     def load(cls, path: Path) -> RunRecord:
@@ -129,8 +130,7 @@ def _map_image(values: np.ndarray) -> np.ndarray:
 
 def _save(fig: plt.Figure, path: Path) -> None:
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _show_grey(ax: plt.Axes, image: np.ndarray, record: RunRecord, alpha: float = 1.0) -> None:
@@ -406,19 +406,14 @@ img {{ max-width: 520px; }}
 {sections}<h2>Figures</h2>{images}
 </body></html>
 """
-    path = out_dir / "report.html"
-    path.write_text(page, encoding="utf-8")
-    return path
+    return write_text(out_dir / "report.html", page)
 
 
 def rebuild_report(out_dir: Path) -> Path:
     """Re-make figures and report.html of a finished run from its saved files."""
     out_dir = Path(out_dir)
     metrics_path = out_dir / "metrics.json"
-    try:
-        metrics = json.loads(metrics_path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DataError(metrics_path, "not found: is this a run folder?") from None
-    except json.JSONDecodeError as exc:
-        raise DataError(metrics_path, f"not valid JSON ({exc.msg})", exc.lineno) from None
+    if not metrics_path.is_file():
+        raise DataError(metrics_path, "not found: is this a run folder?")
+    metrics = read_json(metrics_path, "run's metrics")
     return write_report(out_dir, RunRecord.load(out_dir / "run.npz"), metrics)

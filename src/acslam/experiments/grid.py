@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
-import yaml
 from pydantic import (
     AfterValidator,
     BaseModel,
@@ -35,6 +34,7 @@ from pydantic import (
 
 from acslam.config import builtin_scenario_names
 from acslam.errors import ConfigError, PluginError
+from acslam.files import read_yaml
 from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS, Registry
 
 DEFAULT_PLANNER = LOCAL_PLANNERS.default
@@ -174,16 +174,7 @@ def parse_grid(data: Any, source: str) -> ExperimentGrid:
 
 
 def load_grid_file(path: Path) -> ExperimentGrid:
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(path, "", "experiment grid file not found")
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(path, "", f"invalid YAML{where}") from None
-    return parse_grid(data, str(path))
+    return parse_grid(read_yaml(path, "experiment grid file"), str(path))
 
 
 def builtin_grid(name: str) -> ExperimentGrid:

@@ -12,7 +12,6 @@ at the end gives each run's reason.
 from __future__ import annotations
 
 import html
-import json
 import math
 import re
 from collections import defaultdict
@@ -25,6 +24,7 @@ from acslam.errors import DataError
 from acslam.experiments import thesis_data
 from acslam.experiments.grid import DEFAULT_ALLOCATOR, DEFAULT_PLANNER
 from acslam.experiments.sweep import FAILURE_FILE, SPEC_FILE, SWEEP_FILE
+from acslam.files import read_json, write_text
 
 Cell = tuple[str, int, str, str]  # scenario, robots, planner, allocator
 THESIS_NAME = {v: k for k, v in thesis_data.THESIS_ROBOT.items()}
@@ -113,10 +113,7 @@ class Section:
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataError(path, f"not valid JSON ({exc.msg})", exc.lineno) from None
+    return read_json(path, "sweep file")
 
 
 def load_runs(out_dir: Path) -> list[RunOutcome]:
@@ -662,6 +659,6 @@ def write_summary(out_dir: Path, title: str = "acslam experiments") -> tuple[Pat
     sections = build_sections(runs)
     markdown = out_dir / "summary.md"
     page = out_dir / "summary.html"
-    markdown.write_text(to_markdown(title, runs, sections), encoding="utf-8")
-    page.write_text(to_html(title, runs, sections), encoding="utf-8")
+    write_text(markdown, to_markdown(title, runs, sections))
+    write_text(page, to_html(title, runs, sections))
     return markdown, page

@@ -14,7 +14,6 @@ the same ``map``.
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import time
 import traceback
@@ -27,6 +26,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 
 from acslam.errors import AcslamError, ConfigError, WallTimeLimitError
 from acslam.experiments.grid import RunSpec
+from acslam.files import read_json, write_json, write_text
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -62,7 +62,7 @@ def run_dir(out_dir: Path, spec: RunSpec) -> Path:
 def write_failure(folder: Path, reason: str, wall_time_s: float) -> RunResult:
     """Record a run that wrote no metrics; its folder is named by its run id."""
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / FAILURE_FILE).write_text(json.dumps({"reason": reason, "wall_time_s": wall_time_s}))
+    write_json(folder / FAILURE_FILE, {"reason": reason, "wall_time_s": wall_time_s}, indent=None)
     return RunResult(folder.name, "failed", reason, 0.0, wall_time_s)
 
 
@@ -88,7 +88,7 @@ def execute_run(spec: RunSpec, folder: Path) -> RunResult:
     except Exception as exc:  # a worker must report, not die: the sweep goes on
         reason = str(exc) if isinstance(exc, AcslamError) else f"{type(exc).__name__}: {exc}"
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / "error.txt").write_text(traceback.format_exc())
+        write_text(folder / "error.txt", traceback.format_exc())
         reason = "; then ".join([*stopped, reason])
         return write_failure(folder, reason, time.perf_counter() - started)
     (folder / FAILURE_FILE).unlink(missing_ok=True)
@@ -146,7 +146,7 @@ def _check_folder(spec: RunSpec, folder: Path) -> None:
     """A folder made by another grid (other max time, other scenario file) is an error."""
     path = folder / SPEC_FILE
     if path.is_file():
-        saved = json.loads(path.read_text(encoding="utf-8"))
+        saved = read_json(path, "run's definition")
         if saved != spec.key():
             raise ConfigError(
                 path,
@@ -165,9 +165,7 @@ def sweep(
     """Run every spec not finished yet; returns one result per spec (finished ones skipped)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / SWEEP_FILE).write_text(
-        json.dumps({"runs": [asdict(spec) for spec in specs]}, indent=1)
-    )
+    write_json(out_dir / SWEEP_FILE, {"runs": [asdict(spec) for spec in specs]}, indent=1)
     by_id = {spec.run_id: spec for spec in specs}
     results: list[RunResult] = []
     todo: list[tuple[RunSpec, Path]] = []
@@ -176,7 +174,7 @@ def sweep(
         _check_folder(spec, folder)
         metrics_path = folder / "metrics.json"
         if metrics_path.is_file():
-            metrics = json.loads(metrics_path.read_text(encoding="utf-8"))
+            metrics = read_json(metrics_path, "run's metrics")
             result = RunResult(
                 spec.run_id,
                 "completed" if metrics["completed"] else "incomplete",
@@ -190,7 +188,7 @@ def sweep(
                 on_result(spec, result)
             continue
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / SPEC_FILE).write_text(json.dumps(spec.key()))
+        write_json(folder / SPEC_FILE, spec.key(), indent=None)
         todo.append((spec, folder))
     for result in executor.map(todo):
         results.append(result)

@@ -17,7 +17,6 @@ with the odometry since that keyframe. The map and figures are those of every la
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from acslam.datasets.carmen import (
     read_carmen,
 )
 from acslam.errors import DataError
+from acslam.files import write_json
 from acslam.geometry import between, compose
 from acslam.messages import LidarScan, OdometryIncrement, RobotMessage
 from acslam.pipeline.stages import Localizer
@@ -148,5 +148,5 @@ def run_carmen(
     replay_map = write_maps(out_dir, Path(path).name, slam, odometry, algorithms)
     timings_s = {"wall_time_s": time.perf_counter() - wall_start, "slam_time_s": slam_s}
     metrics = _metrics(path, log, offset, len(used), localizer, replay_map, timings_s)
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    write_json(out_dir / "metrics.json", metrics)
     return metrics

@@ -13,7 +13,6 @@ reckoning from the same odometry is scored at the same stamps.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -30,6 +29,7 @@ from acslam.eval.metrics import (
     pooled_localization_errors,
 )
 from acslam.eval.slam_figures import plot_slam_run
+from acslam.files import write_json
 from acslam.geometry import compose, wrap_angles
 from acslam.messages import LandmarkObservations, RobotMessage, RobotSighting
 from acslam.pipeline.stages import Localizer
@@ -273,7 +273,7 @@ def run_mrclam(
         },
     }
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    write_json(out_dir / "metrics.json", metrics)
     truth_lm = np.array(list(data.landmark_truth.values()))
     mode = "known association" if known_association else "PDA"
     plot_slam_run(

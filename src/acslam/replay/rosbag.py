@@ -38,7 +38,6 @@ metrics.json.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -48,6 +47,7 @@ import numpy as np
 
 from acslam.config import AlgorithmsConfig, ScanMatchingConfig
 from acslam.errors import ConfigError, DataError, MessageError
+from acslam.files import write_json
 from acslam.geometry import between, compose
 from acslam.mapping.scan_matching import match_scans, prepare_scan, verify
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, RobotMessage
@@ -374,7 +374,7 @@ def run_rosbag(
         "finished": finish,
         **replay_metrics(localizer, replay_map, replay.duration_s, timings_s),
     }
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    write_json(out_dir / "metrics.json", metrics)
     return metrics
 
 

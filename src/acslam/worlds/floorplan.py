@@ -11,11 +11,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, UnidentifiedImageError
 from scipy import ndimage
 
 from acslam.config import FloorplanWorld
 from acslam.errors import DataError
+from acslam.files import open_image
 from acslam.grid import GridSpec
 from acslam.worlds.world import World
 
@@ -25,13 +25,8 @@ START_CLEARANCE_M = 0.3
 
 def read_grey(path: Path) -> np.ndarray:
     """The image as an 8-bit grey array (image row order), or DataError."""
-    if not path.is_file():
-        raise DataError(path, "floor-plan image not found")
-    try:
-        with Image.open(path) as image:
-            return np.asarray(image.convert("L"))
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise DataError(path, f"not a readable image: {exc}") from None
+    with open_image(path, "floor-plan image") as image:
+        return np.asarray(image.convert("L"))
 
 
 def largest_component(free: np.ndarray) -> np.ndarray:

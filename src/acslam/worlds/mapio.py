@@ -2,19 +2,22 @@
 
 Cells are stored as ROS ``OccupancyGrid`` values: -1 unknown, 0 free, 100 occupied.
 Saving writes the trinary values map_saver writes (0 occupied, 254 free, 205 unknown) and
-loading applies the map_server thresholds, so a save/load round trip is exact.
+loading applies the map_server thresholds, so a save/load round trip is exact. Every
+field of the YAML is checked, and a bad one is named (``map.yaml: occupied_thresh: ...``).
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
+from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from acslam.errors import DataError
+from acslam.config import FiniteFloat, PositiveFloat, Probability, ordered, validated
+from acslam.errors import ConfigError
+from acslam.files import atomic_path, open_image, read_yaml, write_yaml
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from acslam.worlds.world import World
 
@@ -36,7 +39,8 @@ def save_map(stem: Path, cells: np.ndarray, spec: GridSpec) -> tuple[Path, Path]
     pixels[cells == FREE] = _PIXEL[FREE]
     pixels[cells == OCCUPIED] = _PIXEL[OCCUPIED]
     pgm_path = stem.with_suffix(".pgm")
-    Image.fromarray(np.flipud(pixels), mode="L").save(pgm_path)
+    with atomic_path(pgm_path) as temporary:
+        Image.fromarray(np.flipud(pixels), mode="L").save(temporary)
     yaml_path = stem.with_suffix(".yaml")
     description = {
         "image": pgm_path.name,
@@ -47,58 +51,78 @@ def save_map(stem: Path, cells: np.ndarray, spec: GridSpec) -> tuple[Path, Path]
         "occupied_thresh": _OCCUPIED_THRESH,
         "free_thresh": _FREE_THRESH,
     }
-    yaml_path.write_text(yaml.safe_dump(description, sort_keys=False), encoding="utf-8")
+    write_yaml(yaml_path, description)
     return yaml_path, pgm_path
 
 
-def _number(description: dict, key: str, path: Path) -> float:
-    value = description.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise DataError(path, f"field {key!r} must be a finite number, got {value!r}")
-    return float(value)
+class MapDescription(BaseModel):
+    """The fields of a map_server YAML, as map_server reads them. ``mode: raw`` (pixel
+    values taken as occupancy) is not supported: thresholds would misread such a map."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    image: Annotated[str, Field(min_length=1)]
+    mode: Literal["trinary", "scale"] = "trinary"
+    resolution: PositiveFloat
+    origin: tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+    negate: int = 0
+    occupied_thresh: Probability = _OCCUPIED_THRESH
+    free_thresh: Probability = _FREE_THRESH
+
+    _thresholds = ordered(("free_thresh", "occupied_thresh", True))
+
+    @field_validator("negate", mode="before")
+    @classmethod
+    def _flag(cls, value: Any) -> int:
+        """map_server reads ``negate`` as an integer; a quoted "false" is not one."""
+        if isinstance(value, bool) or value in (0, 1):
+            return int(value)
+        raise ValueError(f"must be 0 or 1, got {value!r}")
+
+
+def read_map_description(yaml_path: Path) -> MapDescription:
+    """The checked fields of a map_server YAML, or a ConfigError naming the field."""
+    yaml_path = Path(yaml_path)
+    data = read_yaml(yaml_path, "map file")
+    if not isinstance(data, dict):
+        raise ConfigError(yaml_path, "", "a map file must be a YAML mapping of its fields")
+    description = validated(MapDescription, data, yaml_path)
+    if description.origin[2] != 0.0:
+        raise ConfigError(
+            yaml_path, "origin[2]", "rotated maps (origin yaw != 0) are not supported"
+        )
+    return description
+
+
+def _image_path(yaml_path: Path, description: MapDescription) -> Path:
+    image_path = Path(description.image)
+    return image_path if image_path.is_absolute() else Path(yaml_path).parent / image_path
+
+
+def map_spec(yaml_path: Path) -> GridSpec:
+    """The grid of a map_server map, from its YAML and its image's header alone (no pixels
+    read): what a world of it would allocate."""
+    description = read_map_description(yaml_path)
+    with open_image(_image_path(yaml_path, description), f"map image of {yaml_path}") as image:
+        cols, rows = image.size
+    x0, y0, _ = description.origin
+    return GridSpec(x0, y0, description.resolution, rows, cols)
 
 
 def load_map(yaml_path: Path) -> tuple[np.ndarray, GridSpec]:
     """Read a map_server YAML + image; returns (OccupancyGrid values, grid spec)."""
     yaml_path = Path(yaml_path)
-    if not yaml_path.is_file():
-        raise DataError(yaml_path, "map file not found")
-    try:
-        description = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise DataError(yaml_path, f"not a valid map YAML ({type(exc).__name__})") from None
-    if not isinstance(description, dict) or "image" not in description:
-        raise DataError(yaml_path, "map YAML must be a mapping with an 'image' field")
-    resolution = _number(description, "resolution", yaml_path)
-    if resolution <= 0:
-        raise DataError(yaml_path, f"field 'resolution' must be > 0, got {resolution}")
-    origin = description.get("origin")
-    if not (isinstance(origin, list) and len(origin) == 3):
-        raise DataError(yaml_path, "field 'origin' must be a list [x, y, yaw]")
-    origin_xy_yaw = [_number({"origin": v}, "origin", yaml_path) for v in origin]
-    if origin_xy_yaw[2] != 0.0:
-        raise DataError(yaml_path, "rotated maps (origin yaw != 0) are not supported")
-    occupied_thresh = float(description.get("occupied_thresh", _OCCUPIED_THRESH))
-    free_thresh = float(description.get("free_thresh", _FREE_THRESH))
-    negate = bool(description.get("negate", 0))
+    description = read_map_description(yaml_path)
+    with open_image(_image_path(yaml_path, description), f"map image of {yaml_path}") as image:
+        grey = np.asarray(image.convert("L"), dtype=np.float64)
 
-    image_path = Path(str(description["image"]))
-    if not image_path.is_absolute():
-        image_path = yaml_path.parent / image_path
-    try:
-        with Image.open(image_path) as image:
-            grey = np.asarray(image.convert("L"), dtype=np.float64)
-    except FileNotFoundError:
-        raise DataError(image_path, f"map image named by {yaml_path} not found") from None
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise DataError(image_path, f"map image cannot be read ({exc})") from None
-
-    occupancy = grey / 255.0 if negate else (255.0 - grey) / 255.0
+    occupancy = grey / 255.0 if description.negate else (255.0 - grey) / 255.0
     cells = np.full(grey.shape, UNKNOWN, dtype=np.int8)
-    cells[occupancy > occupied_thresh] = OCCUPIED
-    cells[occupancy < free_thresh] = FREE
+    cells[occupancy > description.occupied_thresh] = OCCUPIED
+    cells[occupancy < description.free_thresh] = FREE
     cells = np.flipud(cells).copy()
-    spec = GridSpec(origin_xy_yaw[0], origin_xy_yaw[1], resolution, *cells.shape)
+    x0, y0, _ = description.origin
+    spec = GridSpec(x0, y0, description.resolution, *cells.shape)
     return cells, spec
 
 
