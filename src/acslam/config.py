@@ -230,10 +230,19 @@ class SensorsConfig(Section):
 
 
 class SimConfig(Section):
-    """Simulator clock: the fixed integration step of eq. 4.72 and the time limit."""
+    """Simulator clock: the fixed integration step of eq. 4.72 and the time limit; and the
+    largest world grid a run may allocate (checked before it does, see
+    :mod:`acslam.worlds.limits`).
+
+    ``dt_s`` may not exceed the control period or any sensor period: a step longer than a
+    period would fire that sensor (or the planner) less often than its rate says. The
+    default cell budget, 64 M cells, holds a 400 m x 400 m world at 0.05 m (a 200 m x 200 m
+    one at 0.025 m) and keeps a run within a workstation's memory.
+    """
 
     dt_s: PositiveFloat = 0.02
     max_time_s: PositiveFloat = 600.0
+    max_grid_cells: Annotated[int, Field(ge=1)] = 64_000_000
 
 
 # --------------------------------------------------------------------------- algorithms
@@ -570,6 +579,7 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
     if not isinstance(data, dict):
         raise ConfigError(source, "", "a scenario must be a YAML mapping of sections")
     config = validated(ScenarioConfig, data, source)
+    _check_clock(config, source)
     world_file = getattr(config.world, "file", None)
     if world_file is not None and not world_file.is_absolute() and Path(source).is_file():
         resolved = (Path(source).parent / world_file).resolve()
@@ -577,6 +587,24 @@ def parse_scenario(data: Any, source: str | Path) -> ScenarioConfig:
             update={"world": config.world.model_copy(update={"file": resolved})}
         )
     return config
+
+
+def _check_clock(config: ScenarioConfig, source: str | Path) -> None:
+    """``sim.dt_s`` no longer than the control period and every sensor period."""
+    sensors = config.sensors
+    periods_s = {
+        "algorithms.planning.control_period_s": config.algorithms.planning.control_period_s,
+        "the period of sensors.odometry.rate_hz": 1.0 / sensors.odometry.rate_hz,
+        "the period of sensors.lidar.rate_hz": 1.0 / sensors.lidar.rate_hz,
+        "the period of sensors.camera.rate_hz": 1.0 / sensors.camera.rate_hz,
+    }
+    name, period_s = min(periods_s.items(), key=lambda item: item[1])
+    if config.sim.dt_s > period_s + 1e-12:
+        raise ConfigError(
+            source,
+            "sim.dt_s",
+            f"the step of {config.sim.dt_s:g} s is longer than {name} ({period_s:g} s)",
+        )
 
 
 def validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str = "") -> Any:

@@ -18,6 +18,7 @@ from acslam.seeding import Stream, rng
 from acslam.sim.simulator import Simulator
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
+from acslam.worlds.limits import check_world_grid
 from acslam.worlds.world import World
 
 
@@ -101,22 +102,24 @@ def _check_starts(starts: np.ndarray, world: World, radius_m: float, source: str
 
 
 def build_scenario(config: ScenarioConfig, source: str, robots: int | None = None) -> Scenario:
-    """Build the world and check the team against it.
+    """Check the world's grid against the memory budget, build the world and check the
+    team against it.
 
     ``robots`` overrides ``robots.count`` and picks the first N start poses.
     """
+    team = config.robots
+    count = robots or team.count or (len(team.starts) if team.starts else 1)
+    check_world_grid(config, source, count)
     try:
         world = build_world(config.world, config.seed)
     except ConfigError as exc:
         if exc.source != ConfigError(None, "", "").source:
             raise
         raise ConfigError(source, exc.field, exc.problem) from None
-    team = config.robots
     if team.starts is not None:
         available, field = np.array(team.starts, dtype=float), "robots.starts"
     else:
         available, field = world.default_starts, "robots.starts (the world's default starts)"
-    count = robots or team.count or (len(team.starts) if team.starts else 1)
     if len(available) == 0:
         raise ConfigError(source, "robots.starts", "this world suggests no start poses: give some")
     if count > len(available):

@@ -122,10 +122,15 @@ def rasterise(
     return ~free
 
 
+def dungeon_spec(cfg: DungeonWorld) -> GridSpec:
+    res = cfg.resolution_m
+    return GridSpec(0.0, 0.0, res, round(cfg.height_m / res), round(cfg.width_m / res))
+
+
 def dungeon_world(cfg: DungeonWorld, rng: np.random.Generator) -> World:
     """Build a dungeon whose rooms all connect; starts fill the largest room's centre."""
     res = cfg.resolution_m
-    spec = GridSpec(0.0, 0.0, res, round(cfg.height_m / res), round(cfg.width_m / res))
+    spec = dungeon_spec(cfg)
     for _ in range(MAX_LAYOUT_TRIES):
         rooms = place_rooms(cfg, rng)
         centres = (rooms[:, :2] + rooms[:, 2:]) / 2

@@ -29,6 +29,13 @@ def read_grey(path: Path) -> np.ndarray:
         return np.asarray(image.convert("L"))
 
 
+def floorplan_spec(cfg: FloorplanWorld) -> GridSpec:
+    """One cell per pixel, read from the image's header alone."""
+    with open_image(Path(cfg.file), "floor-plan image") as image:
+        cols, rows = image.size
+    return GridSpec(0.0, 0.0, cfg.resolution_m, rows, cols)
+
+
 def largest_component(free: np.ndarray) -> np.ndarray:
     """Mask of the largest 8-connected region of ``free`` (empty if there is none)."""
     labels, count = ndimage.label(free, structure=np.ones((3, 3), dtype=bool))

@@ -109,6 +109,18 @@ def _poses_along(line: np.ndarray, arc_lengths: np.ndarray) -> np.ndarray:
     return np.column_stack([xy, theta])
 
 
+def osm_spec(cfg: OsmWorld) -> GridSpec:
+    """The window of ``width_m`` x ``height_m`` around the crop centre."""
+    res = cfg.resolution_m
+    return GridSpec(
+        -cfg.width_m / 2,
+        -cfg.height_m / 2,
+        res,
+        round(cfg.height_m / res),
+        round(cfg.width_m / res),
+    )
+
+
 def osm_world(cfg: OsmWorld) -> World:
     """Rasterise the roads around the crop centre; starts sit on the road nearest it."""
     path = Path(cfg.file)
@@ -119,13 +131,7 @@ def osm_world(cfg: OsmWorld) -> World:
     lines = [project_lon_lat(line, center) for line in lines_deg]
 
     res = cfg.resolution_m
-    spec = GridSpec(
-        -cfg.width_m / 2,
-        -cfg.height_m / 2,
-        res,
-        round(cfg.height_m / res),
-        round(cfg.width_m / res),
-    )
+    spec = osm_spec(cfg)
     reach = cfg.road_width_m
     in_window = [
         line

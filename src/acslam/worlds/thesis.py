@@ -182,11 +182,16 @@ def rect_cells(rect: Rect, resolution_m: float) -> tuple[slice, slice]:
     return slice(y0, y1), slice(x0, x1)
 
 
+def thesis_spec(cfg: ThesisWorld) -> GridSpec:
+    """The 40 m x 40 m grid every thesis layout is drawn on."""
+    size = round(GRID_SIZE_M / cfg.resolution_m)
+    return GridSpec(0.0, 0.0, cfg.resolution_m, size, size)
+
+
 def thesis_world(cfg: ThesisWorld) -> World:
     """Rasterise the layout of ``cfg.experiment`` onto a 40 m x 40 m occupied grid."""
     layout = thesis_layout(cfg.experiment)
-    size = round(GRID_SIZE_M / cfg.resolution_m)
-    spec = GridSpec(0.0, 0.0, cfg.resolution_m, size, size)
+    spec = thesis_spec(cfg)
     occupied = np.ones(spec.shape, dtype=bool)
     for rect in layout.spaces:
         occupied[rect_cells(rect, cfg.resolution_m)] = False

@@ -51,14 +51,21 @@ def stamp_discs(occupied: np.ndarray, spec: GridSpec, centres: np.ndarray, radiu
     occupied[rows[inside], cols[inside]] = True
 
 
-def vineyard_world(cfg: VineyardWorld, rng: np.random.Generator) -> World:
-    """Build the vineyard; starts form a column in the west headland facing the rows."""
+def vineyard_spec(cfg: VineyardWorld) -> GridSpec:
+    """The field, its headlands, the fence and the margin outside it."""
     field_width = (cfg.row_count - 1) * cfg.row_spacing_m
     border = cfg.headland_m + FENCE_THICKNESS_M + OUTER_MARGIN_M
     res = cfg.resolution_m
     cols = math.ceil((cfg.row_length_m + 2 * border) / res)
     rows = math.ceil((field_width + 2 * border) / res)
-    spec = GridSpec(-border, -border, res, rows, cols)
+    return GridSpec(-border, -border, res, rows, cols)
+
+
+def vineyard_world(cfg: VineyardWorld, rng: np.random.Generator) -> World:
+    """Build the vineyard; starts form a column in the west headland facing the rows."""
+    field_width = (cfg.row_count - 1) * cfg.row_spacing_m
+    res = cfg.resolution_m
+    spec = vineyard_spec(cfg)
 
     occupied = np.zeros(spec.shape, dtype=bool)
     fence_cells = math.ceil(FENCE_THICKNESS_M / res)
