@@ -404,6 +404,11 @@ def _each_step(*hooks: Callable | None) -> Callable | None:
     return each
 
 
+def _percent(fraction: float | None) -> str:
+    """A fraction as a percentage; a rate with nothing to count (null) as a dash."""
+    return "—" if fraction is None else f"{100 * fraction:.1f} %"
+
+
 def _print_summary(metrics: dict, reachable_m2: float) -> None:
     status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
     table = Table(
@@ -430,9 +435,9 @@ def _print_summary(metrics: dict, reachable_m2: float) -> None:
     _console.print(table)
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     _console.print(
-        f"explored {100 * coverage['explored_fraction_of_reachable']:.1f} % of the "
-        f"{reachable_m2:.1f} m² reachable; map accuracy {100 * mapping['accuracy']:.1f} %, "
-        f"TPR {100 * mapping['tpr']:.1f} %; collisions: {safety['obstacle_collisions']} wall, "
+        f"explored {_percent(coverage['explored_fraction_of_reachable'])} of the "
+        f"{reachable_m2:.1f} m² reachable; map accuracy {_percent(mapping['accuracy'])}, "
+        f"TPR {_percent(mapping['tpr'])}; collisions: {safety['obstacle_collisions']} wall, "
         f"{safety['robot_collisions']} robot; stuck events {safety['stuck_events']}; "
         f"server cycle {metrics['server_cycle_ms']['mean']:.1f} ms mean, "
         f"{metrics['server_cycle_ms']['p95']:.1f} ms p95"

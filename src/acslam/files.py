@@ -7,13 +7,15 @@ UTF-8 and YAML syntax errors (control characters included) all become one
 
 Writing: every file goes to a temporary name in its folder first and is renamed into place
 (:func:`atomic_path`), so a run stopped at any moment leaves whole files or none, never a
-truncated one.
+truncated one. JSON is written strictly (:func:`write_json`): a number that is not finite
+is ``null``, as the JSON specification has no infinity or NaN.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -141,9 +143,20 @@ def write_text(path: Path, text: str) -> Path:
     return Path(path)
 
 
+def strict_json(value: Any) -> Any:
+    """``value`` with every float that is not finite replaced by None (JSON ``null``)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: strict_json(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(item) for item in value]
+    return value
+
+
 def write_json(path: Path, data: Any, indent: int | None = 2) -> Path:
-    """Write ``data`` as JSON, atomically."""
-    return write_text(path, json.dumps(data, indent=indent))
+    """Write ``data`` as strict JSON (``null`` for infinities and NaN), atomically."""
+    return write_text(path, json.dumps(strict_json(data), indent=indent, allow_nan=False))
 
 
 def write_yaml(path: Path, data: Any) -> Path:

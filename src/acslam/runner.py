@@ -13,7 +13,6 @@ so a failed or timed-out run keeps what it produced.
 
 from __future__ import annotations
 
-import math
 import time
 import traceback
 from collections import defaultdict
@@ -31,7 +30,7 @@ from acslam.eval.metrics import (
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
-from acslam.files import write_json, write_text, write_yaml
+from acslam.files import strict_json, write_json, write_text, write_yaml
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
@@ -217,10 +216,11 @@ def finish_run(
     extra: dict | None = None,
 ) -> dict:
     """Score a finished run from its last snapshot and write its folder; ``extra`` adds
-    metric sections."""
+    metric sections. Returns the metrics as written: a figure that has no value (no other
+    robot to keep a distance from, a rate without cells) is None, JSON's ``null``."""
     record = _record(scenario, log, truth)
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
-    metrics.update(extra or {})
+    metrics = strict_json({**metrics, **(extra or {})})
     _write_outputs(out_dir, scenario, record)
     write_json(out_dir / "metrics.json", metrics)
     write_report(out_dir, record, metrics)
@@ -290,8 +290,8 @@ def _metrics(
         true_xy = _common_clock_xy(record.true_trajectories)
         gaps = np.linalg.norm(true_xy[:, :, None] - true_xy[:, None], axis=-1)
         min_distance: float | None = float(gaps[:, ~np.eye(count, dtype=bool)].min())
-    else:
-        min_distance = math.inf if count == 1 else None
+    else:  # one robot keeps no distance to another; a real team has no ground truth
+        min_distance = None
     collisions = truth.collisions
     stages_ms = {
         str(stage): 1000 * samples[:, 1]

@@ -278,9 +278,17 @@ def write_figures(out_dir: Path, record: RunRecord) -> list[Path]:
 
 
 def _number(value: object, digits: int = 3) -> str:
+    """A table cell; a figure that has none (None, NaN) is a dash, which
+    :func:`missing_values` explains."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
     if isinstance(value, float):
-        return "—" if math.isnan(value) else f"{value:.{digits}f}"
+        return f"{value:.{digits}f}"
     return html.escape(str(value))
+
+
+def _percent(fraction: float | None) -> float | None:
+    return None if fraction is None else 100 * fraction
 
 
 def _table(header: list[str], rows: list[list[object]]) -> str:
@@ -347,7 +355,7 @@ def report_tables(metrics: dict) -> dict[str, str]:
         "Coverage per robot combination (Table 5.3)": _table(
             ["robots", "area [m²]", "rate [%]"],
             [
-                [name.replace("+", ", "), c["area_m2"], 100 * c["rate"]]
+                [name.replace("+", ", "), c["area_m2"], _percent(c["rate"])]
                 for name, c in metrics["coverage"].items()
                 if isinstance(c, dict)
             ]
@@ -355,14 +363,14 @@ def report_tables(metrics: dict) -> dict[str, str]:
                 [
                     "explored fraction of the reachable free area [%]",
                     "",
-                    100 * metrics["coverage"]["explored_fraction_of_reachable"],
+                    _percent(metrics["coverage"]["explored_fraction_of_reachable"]),
                 ]
             ],
         ),
         "Mapping accuracy (Table 5.4)": _table(
             ["metric", "value [%]"],
             [
-                [k.upper(), 100 * metrics["mapping"][k]]
+                [k.upper(), _percent(metrics["mapping"][k])]
                 for k in ("accuracy", "tpr", "tnr", "fpr", "fnr")
             ],
         ),
@@ -386,6 +394,10 @@ def write_report(out_dir: Path, record: RunRecord, metrics: dict) -> Path:
     sections = "".join(
         f"<h2>{html.escape(title)}</h2>{table}" for title, table in report_tables(metrics).items()
     )
+    missing = missing_values(metrics)
+    if missing:
+        items = "".join(f"<li>{html.escape(why)}</li>" for why in missing)
+        sections += f"<p>A dash (—) marks a figure that has no value:</p><ul>{items}</ul>"
     images = "".join(
         f'<figure><img alt="{p.stem}" src="data:image/png;base64,'
         f'{base64.b64encode(p.read_bytes()).decode()}"><figcaption>{p.stem}</figcaption></figure>'
@@ -407,6 +419,31 @@ img {{ max-width: 520px; }}
 </body></html>
 """
     return write_text(out_dir / "report.html", page)
+
+
+def missing_values(metrics: dict) -> list[str]:
+    """Why each figure the report shows as a dash has no value."""
+    why = []
+    if metrics["safety"].get("min_robot_distance_m", 0.0) is None:
+        why.append(
+            "minimum robot distance: a single robot has no other to keep a distance from"
+            if metrics["robots"] == 1
+            else "minimum robot distance: the robots' true positions are not known"
+        )
+    if metrics["safety"].get("obstacle_collisions", 0) is None:
+        why.append("collisions: not measured (real robots report no contacts)")
+    for name in metrics["timing"]["per_robot_s"]:
+        if name not in metrics["localization"]:
+            why.append(
+                f"localization of {name}: no ground truth, or no estimate within it (a run "
+                "that ended before the robot's first keyframe)"
+            )
+    for key in ("accuracy", "tpr", "tnr", "fpr", "fnr"):
+        if metrics["mapping"][key] is None:
+            why.append(f"{key.upper()}: no mapped cell falls in the cells this rate counts")
+    if metrics["coverage"]["explored_fraction_of_reachable"] is None:
+        why.append("explored fraction: no free area is reachable from the first start")
+    return why
 
 
 def rebuild_report(out_dir: Path) -> Path:
