@@ -6,12 +6,13 @@ the work itself lives in the library modules the commands call.
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
@@ -59,6 +60,19 @@ class PluginChoice(click.Choice):
         return tuple(REGISTRIES[self.kind].names())
 
 
+class FiniteFloatRange(click.FloatRange):
+    """A FloatRange that refuses NaN and infinity: NaN passes every bound (it compares
+    false), and neither is a number of seconds, metres or a rate."""
+
+    name = "float range"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
+
+
 def out_option(help_text: str, required: bool = False) -> Callable:
     """--out DIR, the folder a command writes."""
     return click.option(
@@ -76,7 +90,7 @@ def max_time_option(help_text: str) -> Callable:
     return click.option(
         "--max-time",
         "max_time_s",
-        type=click.FloatRange(min=0, min_open=True),
+        type=FiniteFloatRange(min=0, min_open=True),
         default=None,
         help=help_text,
     )
@@ -86,14 +100,14 @@ def fault_options(command: Callable) -> Callable:
     """--drop-rate and --latency-ms: faults a robot agent injects into its sensor messages."""
     command = click.option(
         "--latency-ms",
-        type=click.FloatRange(min=0, max=60000, max_open=True),
+        type=FiniteFloatRange(min=0, max=60000, max_open=True),
         default=0.0,
         show_default=True,
         help="Delay added to every sensor message a robot sends.",
     )(command)
     return click.option(
         "--drop-rate",
-        type=click.FloatRange(min=0, max=1, max_open=True),
+        type=FiniteFloatRange(min=0, max=1, max_open=True),
         default=0.0,
         show_default=True,
         help="Fraction of sensor messages a robot drops (seeded).",
@@ -794,7 +808,7 @@ def bench_command(out_dir: Path, quick: bool) -> None:
 @click.option(
     "--heartbeat-timeout",
     "heartbeat_timeout_s",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FiniteFloatRange(min=0, min_open=True),
     default=2.0,
     show_default=True,
     help="Seconds without a heartbeat (with --ros2: without odometry) before a robot is "
@@ -824,7 +838,8 @@ def bench_command(out_dir: Path, quick: bool) -> None:
 )
 @click.option(
     "--laser-mount",
-    type=(float, float, float),
+    type=(FiniteFloatRange(), FiniteFloatRange(), FiniteFloatRange()),
+    metavar="X Y YAW",
     default=None,
     help="--ros2: the laser's pose X Y YAW (m, m, rad) in the odometry's base frame, instead "
     "of reading it from tf_static.",
@@ -919,7 +934,7 @@ def serve_command(
 @click.option(
     "--command-timeout",
     "command_timeout_s",
-    type=click.FloatRange(min=0, min_open=True),
+    type=FiniteFloatRange(min=0, min_open=True),
     default=0.5,
     show_default=True,
     help="Seconds without a velocity command before the robot stops.",

@@ -8,7 +8,8 @@ snapshot each step returns (:class:`RunLog`). The scoring and writing half
 the wire instead.
 Ground truth is read only after the run, for the metrics. Whatever happens, the run folder
 gets ``config.yaml`` first and ``metrics.json`` last, with ``completed`` and ``reason``,
-so a failed or timed-out run keeps what it produced.
+so a failed or timed-out run keeps what it produced; a run too short for any estimate
+still gets its ``metrics.json``.
 """
 
 from __future__ import annotations
@@ -281,7 +282,9 @@ def _metrics(
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
-        if len(true) >= 2:  # a real robot has no ground truth to be scored against
+        # A real robot has no ground truth to be scored against, and a run shorter than a
+        # keyframe has no estimate within the truth's span.
+        if len(true) >= 2 and np.any((est[:, 0] >= true[0, 0]) & (est[:, 0] <= true[-1, 0])):
             localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
     cell_area_m2 = scenario.world.spec.resolution_m**2
     known = record.estimated_values != UNKNOWN

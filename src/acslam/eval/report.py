@@ -2,7 +2,8 @@
 
 A run saves a :class:`RunRecord` (``run.npz``) beside ``metrics.json``; figures and the
 report are made from those two files only, so ``acslam report DIR`` can rebuild them
-without running anything again.
+without running anything again. It reads and checks both (:class:`ReportedMetrics`)
+before it writes anything.
 """
 
 from __future__ import annotations
@@ -10,11 +11,16 @@ from __future__ import annotations
 import base64
 import html
 import math
+import zipfile
+import zlib
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
+from acslam.config import validated
 from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
 from acslam.eval.plotting import plt, save_figure
@@ -77,24 +83,34 @@ class RunRecord:
 
     @classmethod
     def load(cls, path: Path) -> RunRecord:
+        """The record saved at ``path``, every array read and the grids' shapes checked,
+        or a DataError."""
         try:
-            data = np.load(path)
-            x0, y0, res, rows, cols = data["spec"]
-            values = {"spec": GridSpec(float(x0), float(y0), float(res), int(rows), int(cols))}
-            for f in fields(cls):
-                if f.name == "spec":
-                    continue
-                items = sorted(
-                    (k for k in data if k.startswith(f.name + ".")),
-                    key=lambda k: int(k.rsplit(".", 1)[1]),
-                )
-                if f.name in data:
-                    values[f.name] = data[f.name]
-                elif items or (f.default is MISSING and f.default_factory is MISSING):
-                    values[f.name] = [data[k] for k in items]
-                # else: written before the field existed, so it keeps its default
-            return cls(**values)
-        except (OSError, KeyError, ValueError) as exc:
+            with np.load(path) as data:
+                x0, y0, res, rows, cols = data["spec"]
+                spec = GridSpec(float(x0), float(y0), float(res), int(rows), int(cols))
+                values: dict[str, object] = {"spec": spec}
+                for f in fields(cls):
+                    if f.name == "spec":
+                        continue
+                    required = f.default is MISSING and f.default_factory is MISSING
+                    items = sorted(
+                        (k for k in data if k.startswith(f.name + ".")),
+                        key=lambda k: int(k.rsplit(".", 1)[1]),
+                    )
+                    if f.name in data:
+                        values[f.name] = data[f.name]
+                    elif str(f.type).startswith("list[") and (items or required):
+                        values[f.name] = [data[k] for k in items]
+                    elif required:
+                        raise KeyError(f"no array {f.name!r}")
+                    # else: written before the field existed, so it keeps its default
+            record = cls(**values)
+            for name in ("true_occupied", "reachable", "estimated_values"):
+                if getattr(record, name).shape != spec.shape:
+                    raise ValueError(f"{name} is not of the grid's shape {spec.shape}")
+            return record
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise DataError(path, f"not a run record ({exc})") from None
 
 
@@ -446,11 +462,96 @@ def missing_values(metrics: dict) -> list[str]:
     return why
 
 
-def rebuild_report(out_dir: Path) -> Path:
-    """Re-make figures and report.html of a finished run from its saved files."""
+# --------------------------------------------------------------------------- reading back
+
+Fraction = Annotated[float, Field(ge=0, le=1)] | None
+Number = Annotated[float, Field(allow_inf_nan=False)] | None
+
+
+class _Section(BaseModel):
+    """A part of metrics.json: the keys the report reads are checked, others kept."""
+
+    model_config = ConfigDict(extra="allow")
+
+
+class _Timing(_Section):
+    per_robot_s: dict[str, Number]
+    total_s: Number
+    gap_s: Number
+
+
+class _Localization(_Section):
+    final_dist_m: float
+    mae_m: float
+    rmse_m: float
+    std_m: float
+    final_yaw_rad: float
+    mae_yaw_rad: float
+    rmse_yaw_rad: float
+    std_yaw_rad: float
+
+
+class _Coverage(_Section):
+    explored_fraction_of_reachable: Fraction
+
+
+class _Mapping(_Section):
+    accuracy: Fraction
+    tpr: Fraction
+    tnr: Fraction
+    fpr: Fraction
+    fnr: Fraction
+
+
+class _CycleStatistics(_Section):
+    mean: float
+    p95: float
+    p99: float | None = None  # runs written before p99 and max were recorded lack them
+    max: float | None = None
+
+
+class _Cycle(_CycleStatistics):
+    control_period_ms: Annotated[float, Field(gt=0)]
+    __pydantic_extra__: dict[str, _CycleStatistics]
+
+
+class ReportedMetrics(_Section):
+    """What the report reads of ``metrics.json``."""
+
+    scenario: str
+    robots: Annotated[int, Field(ge=1)]
+    seed: int
+    planner: str
+    allocator: str
+    completed: bool
+    reason: str
+    sim_time_s: float
+    wall_time_s: float
+    real_time_factor: float
+    timing: _Timing
+    localization: dict[str, _Localization]
+    coverage: _Coverage
+    mapping: _Mapping
+    safety: dict[str, float | None]  # infinite in runs written before JSON was strict
+    server_cycle_ms: _Cycle
+
+
+def read_run(out_dir: Path) -> tuple[dict, RunRecord]:
+    """A run folder's metrics (checked as :class:`ReportedMetrics`) and run record, or
+    one error naming the file and the field."""
     out_dir = Path(out_dir)
     metrics_path = out_dir / "metrics.json"
     if not metrics_path.is_file():
         raise DataError(metrics_path, "not found: is this a run folder?")
     metrics = read_json(metrics_path, "run's metrics")
-    return write_report(out_dir, RunRecord.load(out_dir / "run.npz"), metrics)
+    if not isinstance(metrics, dict):
+        raise DataError(metrics_path, "the run's metrics must be a JSON object")
+    validated(ReportedMetrics, metrics, metrics_path)
+    return metrics, RunRecord.load(out_dir / "run.npz")
+
+
+def rebuild_report(out_dir: Path) -> Path:
+    """Re-make figures and report.html of a finished run from its saved files, both read
+    and checked before anything is written."""
+    metrics, record = read_run(out_dir)
+    return write_report(out_dir, record, metrics)
