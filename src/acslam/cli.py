@@ -1,7 +1,8 @@
 """The ``acslam`` command line: argument parsing and the one error boundary.
 
-Every :class:`~acslam.errors.AcslamError` becomes one line on stderr and exit code 1;
-the work itself lives in the library modules the commands call.
+Every :class:`~acslam.errors.AcslamError` becomes one line on stderr and exit code 1. A
+run stopped by SIGINT or SIGTERM still writes its results and exits with 130 or 143
+(:mod:`acslam.stop`). The work itself lives in the library modules the commands call.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
+from acslam import stop
 from acslam.errors import AcslamError
 
 if TYPE_CHECKING:
@@ -191,6 +193,13 @@ def _team(team: int | list[str] | None, ros2: bool) -> tuple[int | None, list[st
     return team, None
 
 
+def _exit_if_stopped(signals: stop.Signals, out_dir: Path) -> None:
+    """After a run a signal stopped (its results written): say so and exit 130 / 143."""
+    if signals.exit_code is not None:
+        click.echo(f"acslam: {signals.reason}: the results so far are in {out_dir}", err=True)
+        raise click.exceptions.Exit(signals.exit_code)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="acslam")
 def cli() -> None:
@@ -329,16 +338,19 @@ def run_command(
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
     reachable_m2 = scenario.reachable_area_m2
-    with Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        TextColumn(
-            "{task.fields[sim]:>6.1f} s sim  explored {task.fields[explored]:>5.1f} m²"
-            "  frontiers {task.fields[frontiers]:>5}"
-        ),
-        TimeElapsedColumn(),
-        console=_console,
-    ) as progress:
+    with (
+        stop.on_signals() as signals,
+        Progress(
+            TextColumn("[progress.description]{task.description}"),
+            BarColumn(),
+            TextColumn(
+                "{task.fields[sim]:>6.1f} s sim  explored {task.fields[explored]:>5.1f} m²"
+                "  frontiers {task.fields[frontiers]:>5}"
+            ),
+            TimeElapsedColumn(),
+            console=_console,
+        ) as progress,
+    ):
         task = progress.add_task(
             scenario.config.name, total=limit_s, sim=0.0, explored=0.0, frontiers=0
         )
@@ -372,6 +384,7 @@ def run_command(
                 metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
     _print_summary(metrics, reachable_m2)
     _console.print(f"run folder: {out_dir}  (report: {out_dir / 'report.html'})")
+    _exit_if_stopped(signals, out_dir)
 
 
 @contextmanager
@@ -714,6 +727,8 @@ def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
 def _sweep_and_summarize(
     specs: list, out_dir: Path, options: dict[str, object], title: str
 ) -> None:
+    """Run the sweep into ``out_dir`` and summarize it; a signal stops it after the runs
+    under way have written their results."""
     from acslam.experiments.summary import write_summary
     from acslam.experiments.sweep import ProcessPoolRunner, sweep_with_progress
 
@@ -723,9 +738,11 @@ def _sweep_and_summarize(
         runner = RayRunner(address=options["ray_address"], local_cpus=options["workers"])
     else:
         runner = ProcessPoolRunner(options["workers"])
-    sweep_with_progress(specs, out_dir, runner, _console)
-    markdown, page = write_summary(out_dir, title)
+    with stop.on_signals() as signals:
+        sweep_with_progress(specs, out_dir, runner, _console)
+        markdown, page = write_summary(out_dir, title)
     _console.print(f"summary: {markdown}  {page}")
+    _exit_if_stopped(signals, out_dir)
 
 
 @experiments_group.command("thesis")
@@ -886,37 +903,40 @@ def serve_command(
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
-    if ros2:
-        from acslam.ros2.launch import default_namespaces
-        from acslam.ros2.serve import Ros2ServeOptions, serve_ros2
-        from acslam.ros2.source import Ros2Topics
+    with stop.on_signals() as signals:
+        if ros2:
+            from acslam.ros2.launch import default_namespaces
+            from acslam.ros2.serve import Ros2ServeOptions, serve_ros2
+            from acslam.ros2.source import Ros2Topics
 
-        namespaces = namespaces or default_namespaces(scenario.robot_count)
-        options = Ros2ServeOptions(
-            tuple(namespaces),
-            _ros2(distro, attachment, domain_id, bridge),
-            connect=connect,
-            listen=listen,
-            topics=Ros2Topics(
-                scan=scan_topic,
-                odom=odom_topic,
-                tf_static=tf_static_topic,
-                cmd_vel_stamped=None if cmd_vel_type == "auto" else cmd_vel_type == "twist-stamped",
-            ),
-            global_tf=global_tf,
-            laser_mount=laser_mount,
-            lost_after_s=heartbeat_timeout_s,
-        )
-        where = listen or ", ".join(connect)
-        click.echo(f"serving ROS 2 robots {', '.join(namespaces)} via {where} -> {out_dir}")
-        metrics = serve_ros2(scenario, out_dir, limit_s, options)
-    else:
-        from acslam.distributed.server_node import ServeOptions, serve
+            namespaces = namespaces or default_namespaces(scenario.robot_count)
+            stamped = None if cmd_vel_type == "auto" else cmd_vel_type == "twist-stamped"
+            options = Ros2ServeOptions(
+                tuple(namespaces),
+                _ros2(distro, attachment, domain_id, bridge),
+                connect=connect,
+                listen=listen,
+                topics=Ros2Topics(
+                    scan=scan_topic,
+                    odom=odom_topic,
+                    tf_static=tf_static_topic,
+                    cmd_vel_stamped=stamped,
+                ),
+                global_tf=global_tf,
+                laser_mount=laser_mount,
+                lost_after_s=heartbeat_timeout_s,
+            )
+            where = listen or ", ".join(connect)
+            click.echo(f"serving ROS 2 robots {', '.join(namespaces)} via {where} -> {out_dir}")
+            metrics = serve_ros2(scenario, out_dir, limit_s, options)
+        else:
+            from acslam.distributed.server_node import ServeOptions, serve
 
-        options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
-        click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
-        metrics = serve(scenario, listen, out_dir, limit_s, options=options)
+            served = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
+            click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
+            metrics = serve(scenario, listen, out_dir, limit_s, options=served)
     _print_summary(metrics, scenario.reachable_area_m2)
+    _exit_if_stopped(signals, out_dir)
 
 
 @cli.command("robot")
@@ -978,30 +998,32 @@ def robot_command(
         command_timeout_s=command_timeout_s,
         truth_out=truth_out,
     )
-    if ros2:
-        from acslam.ros2.launch import default_namespaces
-        from acslam.ros2.robot import run_ros2_robot
+    # SIGTERM is how a launcher ends a robot: it stops, writes its ground truth, exits 0.
+    with stop.on_signals():
+        if ros2:
+            from acslam.ros2.launch import default_namespaces
+            from acslam.ros2.robot import run_ros2_robot
 
-        reason = run_ros2_robot(
-            scenario,
-            robot_id,
-            namespaces or default_namespaces(scenario.robot_count),
-            [connect],
-            limit_s,
-            options=options,
-            ros2=_ros2(distro, attachment, domain_id),
-        )
-    else:
-        from acslam.distributed.robot_node import run_robot
+            reason = run_ros2_robot(
+                scenario,
+                robot_id,
+                namespaces or default_namespaces(scenario.robot_count),
+                [connect],
+                limit_s,
+                options=options,
+                ros2=_ros2(distro, attachment, domain_id),
+            )
+        else:
+            from acslam.distributed.robot_node import run_robot
 
-        reason = run_robot(scenario, robot_id, connect, limit_s, options)
+            reason = run_robot(scenario, robot_id, connect, limit_s, options)
     click.echo(f"robot_{robot_id}: stopped ({reason})")
 
 
 def main() -> None:
     """Entry point: run the CLI behind the single AcslamError boundary."""
     try:
-        cli.main(standalone_mode=False)
+        code = cli.main(standalone_mode=False)
     except click.exceptions.Abort:
         click.echo("acslam: aborted", err=True)
         sys.exit(130)
@@ -1011,6 +1033,7 @@ def main() -> None:
     except AcslamError as exc:
         click.echo(f"acslam: error: {exc}", err=True)
         sys.exit(1)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -8,8 +8,8 @@ snapshot each step returns (:class:`RunLog`). The scoring and writing half
 the wire instead.
 Ground truth is read only after the run, for the metrics. Whatever happens, the run folder
 gets ``config.yaml`` first and ``metrics.json`` last, with ``completed`` and ``reason``,
-so a failed or timed-out run keeps what it produced; a run too short for any estimate
-still gets its ``metrics.json``.
+so a failed, timed-out or stopped run (SIGINT, SIGTERM: :mod:`acslam.stop`) keeps what it
+produced; a run too short for any estimate still gets its ``metrics.json``.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from acslam import stop
 from acslam.errors import AcslamError
 from acslam.eval.metrics import (
     confusion_rates,
@@ -98,13 +99,17 @@ def run_loop(
     on_step: StepHook | None = None,
 ) -> tuple[str, float]:
     """Step the server once per control period until explored, every robot lost, an
-    error, or ``max_time_s``; returns the reason and the wall seconds it took. Any
-    exception ends the run with its reason (:func:`failure_reason`), so the run's
-    products survive it."""
+    error, a stopping signal (:func:`acslam.stop.requested`) or ``max_time_s``; returns
+    the reason and the wall seconds it took. Any exception ends the run with its reason
+    (:func:`failure_reason`), so the run's products survive it."""
     reason = "time limit"
     started = time.perf_counter()
     try:
         while not source.finished and source.time_s < max_time_s - 1e-9:
+            stopped = stop.requested()
+            if stopped is not None:
+                reason = stopped
+                break
             for robot in source.newly_lost():
                 server.mark_lost(robot, source.time_s)
             messages = source.receive()

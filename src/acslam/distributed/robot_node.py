@@ -19,7 +19,6 @@ sensor messages only.
 from __future__ import annotations
 
 import json
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Protocol
 
 import numpy as np
 
+from acslam import stop
 from acslam.errors import TransportError
 from acslam.files import atomic_path
 from acslam.messages import RobotMessage, VelocityCommand
@@ -98,8 +98,8 @@ def run_robot(
 
 
 class RobotAgent:
-    """The real-time loop of one robot node; :attr:`stop` ends it from another thread or
-    a signal handler (reason ``terminated``), with its ground-truth log written."""
+    """The real-time loop of one robot node; a stopping signal (:mod:`acslam.stop`) ends
+    it with that reason (``terminated``, ``interrupted``), its ground-truth log written."""
 
     def __init__(
         self,
@@ -120,7 +120,6 @@ class RobotAgent:
         self.truth_rows: list[tuple[float, float, float, float]] = [(0.0, *start)]
         self.sent_rows = 0
         self.stops = 0
-        self.stop = threading.Event()
 
     def run(self, max_time_s: float, *, wait_for_server: bool = True) -> str:
         """Drive until the server says the run is over, goes silent, :attr:`stop` is set
@@ -135,8 +134,9 @@ class RobotAgent:
         started = last_command = last_status = next_beat = next_truth = time.monotonic()
         reason = "time limit"
         while self.sim.time_s < max_time_s:
-            if self.stop.is_set():
-                reason = "terminated"
+            stopped = stop.requested()
+            if stopped is not None:
+                reason = stopped
                 break
             time.sleep(max(0.0, started + self.sim.time_s + dt_s - time.monotonic()))
             now = time.monotonic()

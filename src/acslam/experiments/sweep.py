@@ -3,9 +3,11 @@
 ``DIR/runs/<run-id>/`` is a normal run folder (what ``acslam run`` writes) plus
 ``spec.json``, the run's definition. A run is finished when its folder has
 ``metrics.json``, whether it explored everything or not, so re-running a sweep redoes
-only the runs that never finished; a folder whose ``spec.json`` disagrees with the grid is
-an error rather than a silent mix of two sweeps. A run that cannot write metrics (bad
-scenario, dead worker) leaves ``failure.json`` with the reason and is tried again next time.
+only the runs that never finished, or that a signal stopped (SIGINT, SIGTERM:
+:mod:`acslam.stop`; their folders are emptied first); a folder whose ``spec.json``
+disagrees with the grid is an error rather than a silent mix of two sweeps. A run that
+cannot write metrics (bad scenario, dead worker) leaves ``failure.json`` with the reason
+and is tried again next time. After a signal no further run is started.
 
 Executors run :func:`execute_run` on specs and yield its results in any order; the
 process pool here is one implementation, and a cluster one (e.g. Ray) only has to provide
@@ -15,6 +17,7 @@ the same ``map``.
 from __future__ import annotations
 
 import multiprocessing
+import shutil
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -24,6 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal, Protocol
 
+from acslam import stop
 from acslam.errors import AcslamError, ConfigError, WallTimeLimitError
 from acslam.experiments.grid import RunSpec
 from acslam.files import read_json, write_json, write_text
@@ -106,7 +110,8 @@ class ProcessPoolRunner:
 
     If a worker dies (segfault, out of memory) the pool breaks; the runs it was holding
     are reported as failed and a new pool carries on with the rest. ``task`` must be a
-    module-level function (spawned workers import it).
+    module-level function (spawned workers import it). Workers stop their run on a signal
+    (:func:`acslam.stop.in_worker`); once the driver has one, no further run starts.
     """
 
     def __init__(
@@ -118,14 +123,18 @@ class ProcessPoolRunner:
     def map(self, specs: Iterable[tuple[RunSpec, Path]]) -> Iterator[RunResult]:
         pending = list(specs)
         context = multiprocessing.get_context("spawn")
-        while pending:
-            with ProcessPoolExecutor(self.workers, mp_context=context) as pool:
+        while pending and stop.requested() is None:
+            with ProcessPoolExecutor(
+                self.workers, mp_context=context, initializer=stop.in_worker
+            ) as pool:
                 futures: dict[Future, Path] = {}
                 broken = False
                 while (pending or futures) and not broken:
-                    while pending and len(futures) < self.workers:
+                    while pending and len(futures) < self.workers and stop.requested() is None:
                         spec, folder = pending.pop(0)
                         futures[pool.submit(self.task, spec, folder)] = folder
+                    if not futures:
+                        break
                     done, _ = wait(futures, return_when=FIRST_COMPLETED)
                     for future in done:
                         folder = futures.pop(future)
@@ -173,8 +182,8 @@ def sweep(
         folder = run_dir(out_dir, spec)
         _check_folder(spec, folder)
         metrics_path = folder / "metrics.json"
-        if metrics_path.is_file():
-            metrics = read_json(metrics_path, "run's metrics")
+        metrics = read_json(metrics_path, "run's metrics") if metrics_path.is_file() else None
+        if metrics is not None and metrics["reason"] not in stop.REASONS.values():
             result = RunResult(
                 spec.run_id,
                 "completed" if metrics["completed"] else "incomplete",
@@ -187,7 +196,9 @@ def sweep(
             if on_result is not None:
                 on_result(spec, result)
             continue
-        folder.mkdir(parents=True, exist_ok=True)
+        if folder.exists():  # unfinished, failed or stopped by a signal: redone from scratch
+            shutil.rmtree(folder)
+        folder.mkdir(parents=True)
         write_json(folder / SPEC_FILE, spec.key(), indent=None)
         todo.append((spec, folder))
     for result in executor.map(todo):

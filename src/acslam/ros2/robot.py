@@ -15,7 +15,6 @@ this one from it, so their LiDAR sees it. The server reads it only for the evalu
 
 from __future__ import annotations
 
-import signal
 import threading
 import time
 from typing import Any
@@ -177,8 +176,9 @@ def run_ros2_robot(
     ros2: Ros2Options,
     topics: Ros2Topics | None = None,
 ) -> str:
-    """Drive simulated robot ``robot_id`` over ROS 2 until ``max_time_s`` or SIGTERM
-    (reason ``terminated``, ground-truth log written); returns why it stopped."""
+    """Drive simulated robot ``robot_id`` over ROS 2 until ``max_time_s`` or a stopping
+    signal (:mod:`acslam.stop`; reason ``terminated``, ground-truth log written); returns
+    why it stopped."""
     if not 0 <= robot_id < scenario.robot_count:
         raise TransportError(
             f"--id: robot {robot_id} does not exist, the team has {scenario.robot_count}"
@@ -195,11 +195,7 @@ def run_ros2_robot(
         link = Ros2RobotEndpoint(node, robot_id, namespaces, topics)
         period_s = config.algorithms.planning.control_period_s
         agent = RobotAgent(sim, link, robot_id, options, config.sim.dt_s, period_s)
-        previous = signal.signal(signal.SIGTERM, lambda *_: agent.stop.set())
-        try:
-            return agent.run(max_time_s, wait_for_server=False)
-        finally:
-            signal.signal(signal.SIGTERM, previous)
+        return agent.run(max_time_s, wait_for_server=False)
     finally:
         node.close()
         session.close()
