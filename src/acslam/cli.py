@@ -21,6 +21,7 @@ from rich.table import Table
 
 from acslam import stop
 from acslam.errors import AcslamError
+from acslam.files import output_folder
 
 if TYPE_CHECKING:
     from acslam.scenario import Scenario
@@ -76,15 +77,26 @@ class FiniteFloatRange(click.FloatRange):
 
 
 def out_option(help_text: str, required: bool = False) -> Callable:
-    """--out DIR, the folder a command writes."""
-    return click.option(
-        "--out",
-        "out_dir",
-        type=click.Path(file_okay=False, path_type=Path),
-        required=required,
-        default=None,
-        help=help_text,
-    )
+    """--out DIR, the folder a command writes, and --overwrite to reuse one that is not
+    empty (:func:`acslam.files.prepare_output_folder`)."""
+
+    def decorate(command: Callable) -> Callable:
+        command = click.option(
+            "--overwrite",
+            is_flag=True,
+            help="Empty the --out folder first if it holds files (a folder that is not empty "
+            "is refused without it).",
+        )(command)
+        return click.option(
+            "--out",
+            "out_dir",
+            type=click.Path(file_okay=False, path_type=Path),
+            required=required,
+            default=None,
+            help=help_text,
+        )(command)
+
+    return decorate
 
 
 def max_time_option(help_text: str) -> Callable:
@@ -230,7 +242,9 @@ def scenarios_command() -> None:
 @robots_option
 @seed_option
 @out_option("Folder for map.yaml, map.pgm (ROS map_server format) and map.png.", required=True)
-def map_command(scenario_name: str, robots: int | None, seed: int | None, out_dir: Path) -> None:
+def map_command(
+    scenario_name: str, robots: int | None, seed: int | None, out_dir: Path, overwrite: bool
+) -> None:
     """Build a scenario's ground-truth world and write it as a map."""
     from acslam.eval.figures import plot_world
     from acslam.scenario import load_scenario
@@ -238,8 +252,9 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
 
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     world = scenario.world
-    yaml_path, _ = save_map(out_dir / "map", world_cells(world), world.spec)
-    plot_world(world, scenario.starts, scenario.landmarks, out_dir / "map.png")
+    with output_folder(out_dir, overwrite=overwrite):
+        yaml_path, _ = save_map(out_dir / "map", world_cells(world), world.spec)
+        plot_world(world, scenario.starts, scenario.landmarks, out_dir / "map.png")
     click.echo(
         f"{world.name}: {world.spec.cols} x {world.spec.rows} cells at "
         f"{world.spec.resolution_m:g} m, free {world.free_area_m2():.1f} m^2, "
@@ -301,6 +316,7 @@ def run_command(
     planner: str | None,
     allocator: str | None,
     out_dir: Path | None,
+    overwrite: bool,
     max_time_s: float | None,
     distributed: bool,
     drop_rate: float,
@@ -340,6 +356,7 @@ def run_command(
     reachable_m2 = scenario.reachable_area_m2
     with (
         stop.on_signals() as signals,
+        output_folder(out_dir, overwrite=overwrite),
         Progress(
             TextColumn("[progress.description]{task.description}"),
             BarColumn(),
@@ -528,6 +545,7 @@ def _algorithms(name_or_path: Path | None):
 def slam_mrclam_command(
     path: Path,
     out_dir: Path,
+    overwrite: bool,
     known_association: bool,
     max_time_s: float | None,
     inter_robot: bool,
@@ -540,14 +558,16 @@ def slam_mrclam_command(
     """
     from acslam.replay.mrclam import run_mrclam
 
-    metrics = run_mrclam(
-        path,
-        out_dir,
-        known_association=known_association,
-        max_time_s=max_time_s,
-        algorithms=_algorithms(algorithms_file),
-        inter_robot=inter_robot,
-    )
+    algorithms = _algorithms(algorithms_file)
+    with output_folder(out_dir, overwrite=overwrite):
+        metrics = run_mrclam(
+            path,
+            out_dir,
+            known_association=known_association,
+            max_time_s=max_time_s,
+            algorithms=algorithms,
+            inter_robot=inter_robot,
+        )
     overall = metrics["overall"]
     click.echo(
         f"position RMSE {overall['slam']['rmse_m']:.3f} m (dead reckoning "
@@ -564,7 +584,9 @@ def slam_mrclam_command(
     required=True,
 )
 @algorithms_option("carmen")
-def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) -> None:
+def slam_carmen_command(
+    log: Path, out_dir: Path, overwrite: bool, algorithms_file: Path | None
+) -> None:
     """Replay a CARMEN laser log (ODOM + FLASER, plain, .bz2 or .gz) through SLAM and mapping.
 
     Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
@@ -572,7 +594,9 @@ def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) 
     """
     from acslam.replay.carmen import run_carmen
 
-    metrics = run_carmen(log, out_dir, algorithms=_algorithms(algorithms_file))
+    algorithms = _algorithms(algorithms_file)
+    with output_folder(out_dir, overwrite=overwrite):
+        metrics = run_carmen(log, out_dir, algorithms=algorithms)
     skipped = metrics["skipped_lines"]["count"]
     click.echo(
         f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "
@@ -629,6 +653,7 @@ def _namespaces(ctx: click.Context, param: click.Parameter, value: str | None) -
 def slam_rosbag_command(
     bag: Path,
     out_dir: Path,
+    overwrite: bool,
     namespaces: list[str],
     scan_topic: str,
     odom_topic: str,
@@ -644,14 +669,16 @@ def slam_rosbag_command(
     from acslam.replay.rosbag import run_rosbag
     from acslam.ros2.source import Ros2Topics
 
-    metrics = run_rosbag(
-        bag,
-        out_dir,
-        namespaces=namespaces,
-        topics=Ros2Topics(scan=scan_topic, odom=odom_topic),
-        algorithms=_algorithms(algorithms_file),
-        finish=finish,
-    )
+    algorithms = _algorithms(algorithms_file)
+    with output_folder(out_dir, overwrite=overwrite):
+        metrics = run_rosbag(
+            bag,
+            out_dir,
+            namespaces=namespaces,
+            topics=Ros2Topics(scan=scan_topic, odom=odom_topic),
+            algorithms=algorithms,
+            finish=finish,
+        )
     robots = ", ".join(
         f"{name}: {robot['scans_used']} scans, {robot['keyframes']} keyframes"
         + (" (scan-matching odometry)" if robot["odometry"] == "scan matching" else "")
@@ -725,12 +752,12 @@ def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
 
 
 def _sweep_and_summarize(
-    specs: list, out_dir: Path, options: dict[str, object], title: str
+    specs: list, out_dir: Path, overwrite: bool, options: dict[str, object], title: str
 ) -> None:
-    """Run the sweep into ``out_dir`` and summarize it; a signal stops it after the runs
-    under way have written their results."""
+    """Run the sweep into ``out_dir`` (a sweep's own folder resumes) and summarize it; a
+    signal stops it after the runs under way have written their results."""
     from acslam.experiments.summary import write_summary
-    from acslam.experiments.sweep import ProcessPoolRunner, sweep_with_progress
+    from acslam.experiments.sweep import SWEEP_FILE, ProcessPoolRunner, sweep_with_progress
 
     if options["executor"] == "ray":
         from acslam.experiments.ray_executor import RayRunner
@@ -738,7 +765,10 @@ def _sweep_and_summarize(
         runner = RayRunner(address=options["ray_address"], local_cpus=options["workers"])
     else:
         runner = ProcessPoolRunner(options["workers"])
-    with stop.on_signals() as signals:
+    with (
+        stop.on_signals() as signals,
+        output_folder(out_dir, overwrite=overwrite, resumable=SWEEP_FILE),
+    ):
         sweep_with_progress(specs, out_dir, runner, _console)
         markdown, page = write_summary(out_dir, title)
     _console.print(f"summary: {markdown}  {page}")
@@ -760,27 +790,33 @@ def _sweep_and_summarize(
     "scaling: 40 m dungeon and vineyard with 1, 2, 4, 8 robots.",
 )
 def experiments_thesis_command(
-    out_dir: Path, max_time_s: float | None, seeds: int, grid_name: str, **executor: object
+    out_dir: Path,
+    overwrite: bool,
+    max_time_s: float | None,
+    seeds: int,
+    grid_name: str,
+    **executor: object,
 ) -> None:
     """Reproduce thesis §5.5 (experiments 1-5 with 1-3 robots) and compare algorithms."""
     from acslam.experiments.grid import builtin_grid, expand
 
     specs = expand(builtin_grid(grid_name), max_time_s=max_time_s, seeds=seeds)
-    _sweep_and_summarize(specs, out_dir, executor, f"acslam experiments: {grid_name} grid")
+    title = f"acslam experiments: {grid_name} grid"
+    _sweep_and_summarize(specs, out_dir, overwrite, executor, title)
 
 
 @experiments_group.command("grid")
 @click.argument("grid_file", type=click.Path(dir_okay=False, path_type=Path))
 @_sweep_options
 def experiments_grid_command(
-    grid_file: Path, out_dir: Path, max_time_s: float | None, **executor: object
+    grid_file: Path, out_dir: Path, overwrite: bool, max_time_s: float | None, **executor: object
 ) -> None:
     """Run the grid of a YAML file (scenarios x robots x planners x allocators x seeds)."""
     from acslam.experiments.grid import expand, load_grid_file
 
     grid = load_grid_file(grid_file)
     specs = expand(grid, max_time_s=max_time_s)
-    _sweep_and_summarize(specs, out_dir, executor, f"acslam experiments: {grid.name}")
+    _sweep_and_summarize(specs, out_dir, overwrite, executor, f"acslam experiments: {grid.name}")
 
 
 @cli.command("bench")
@@ -873,6 +909,7 @@ def serve_command(
     listen: str | None,
     connect: tuple[str, ...],
     out_dir: Path | None,
+    overwrite: bool,
     max_time_s: float | None,
     heartbeat_timeout_s: float,
     ros2: bool,
@@ -903,7 +940,7 @@ def serve_command(
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
-    with stop.on_signals() as signals:
+    with stop.on_signals() as signals, output_folder(out_dir, overwrite=overwrite):
         if ros2:
             from acslam.ros2.launch import default_namespaces
             from acslam.ros2.serve import Ros2ServeOptions, serve_ros2

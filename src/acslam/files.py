@@ -9,6 +9,9 @@ Writing: every file goes to a temporary name in its folder first and is renamed 
 (:func:`atomic_path`), so a run stopped at any moment leaves whole files or none, never a
 truncated one. JSON is written strictly (:func:`write_json`): a number that is not finite
 is ``null``, as the JSON specification has no infinity or NaN.
+
+Output folders: :func:`prepare_output_folder` makes the folder a command writes, refusing
+one that holds something else unless told to overwrite it.
 """
 
 from __future__ import annotations
@@ -17,8 +20,9 @@ import itertools
 import json
 import math
 import os
+import shutil
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -162,3 +166,67 @@ def write_json(path: Path, data: Any, indent: int | None = 2) -> Path:
 def write_yaml(path: Path, data: Any) -> Path:
     """Write ``data`` as YAML in its own key order, atomically."""
     return write_text(path, yaml.safe_dump(data, sort_keys=False))
+
+
+# --------------------------------------------------------------------------- output folders
+
+
+def prepare_output_folder(
+    folder: Path, *, overwrite: bool = False, resumable: str | None = None
+) -> list[Path]:
+    """Make ``folder`` for a command's outputs, or a DataError naming it; returns the
+    folders it created (``folder`` and missing parents, innermost first).
+
+    A folder that already holds files is refused, so that files of an earlier run can
+    never sit beside this one's, unless ``overwrite`` (it is emptied first; never the
+    current folder or one above it) or it holds the file ``resumable`` names (a sweep's
+    own folder, which it resumes)."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise DataError(folder, "exists and is not a folder")
+    if folder.is_dir() and any(folder.iterdir()):
+        if resumable is not None and (folder / resumable).is_file():
+            return []
+        if not overwrite:
+            raise DataError(
+                folder,
+                "the output folder is not empty: give a new one, or --overwrite to empty it first",
+            )
+        if Path.cwd().resolve().is_relative_to(folder.resolve()):
+            raise DataError(folder, "--overwrite never empties the current folder or one above it")
+        for entry in folder.iterdir():
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+        return []
+    missing = [p for p in [folder, *folder.parents] if not p.exists()]
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _remove_empty(missing)
+        blocked = next((p for p in folder.parents if p.exists() and not p.is_dir()), None)
+        problem = f"{blocked} is a file" if blocked is not None else exc.strerror
+        raise DataError(folder, f"cannot create the output folder ({problem})") from None
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for made in folders:
+        with suppress(OSError):
+            made.rmdir()
+
+
+@contextmanager
+def output_folder(
+    folder: Path, *, overwrite: bool = False, resumable: str | None = None
+) -> Iterator[Path]:
+    """:func:`prepare_output_folder` for a block that writes into it: if the block fails
+    before writing anything, the folders made for it are removed again, so a command
+    that fails before it starts leaves nothing behind."""
+    made = prepare_output_folder(folder, overwrite=overwrite, resumable=resumable)
+    try:
+        yield Path(folder)
+    except BaseException:
+        _remove_empty(made)
+        raise
