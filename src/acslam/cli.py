@@ -798,9 +798,11 @@ def experiments_thesis_command(
     **executor: object,
 ) -> None:
     """Reproduce thesis §5.5 (experiments 1-5 with 1-3 robots) and compare algorithms."""
-    from acslam.experiments.grid import builtin_grid, expand
+    from acslam.experiments.grid import builtin_grid, check_cells, expand
 
-    specs = expand(builtin_grid(grid_name), max_time_s=max_time_s, seeds=seeds)
+    grid = builtin_grid(grid_name)
+    check_cells(grid, f"<built-in grid {grid_name}>", seeds=seeds)
+    specs = expand(grid, max_time_s=max_time_s, seeds=seeds)
     title = f"acslam experiments: {grid_name} grid"
     _sweep_and_summarize(specs, out_dir, overwrite, executor, title)
 
@@ -812,9 +814,10 @@ def experiments_grid_command(
     grid_file: Path, out_dir: Path, overwrite: bool, max_time_s: float | None, **executor: object
 ) -> None:
     """Run the grid of a YAML file (scenarios x robots x planners x allocators x seeds)."""
-    from acslam.experiments.grid import expand, load_grid_file
+    from acslam.experiments.grid import check_cells, expand, load_grid_file
 
     grid = load_grid_file(grid_file)
+    check_cells(grid, str(grid_file))
     specs = expand(grid, max_time_s=max_time_s)
     _sweep_and_summarize(specs, out_dir, overwrite, executor, f"acslam experiments: {grid.name}")
 

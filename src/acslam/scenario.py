@@ -101,11 +101,14 @@ def _check_starts(starts: np.ndarray, world: World, radius_m: float, source: str
                 )
 
 
-def build_scenario(config: ScenarioConfig, source: str, robots: int | None = None) -> Scenario:
+def build_scenario(
+    config: ScenarioConfig, source: str, robots: int | None = None, robots_field: str = "--robots"
+) -> Scenario:
     """Check the world's grid against the memory budget, build the world and check the
     team against it.
 
-    ``robots`` overrides ``robots.count`` and picks the first N start poses.
+    ``robots`` overrides ``robots.count`` and picks the first N start poses; an error
+    about it names ``robots_field`` (the option or grid field that gave it).
     """
     team = config.robots
     count = robots or team.count or (len(team.starts) if team.starts else 1)
@@ -123,7 +126,7 @@ def build_scenario(config: ScenarioConfig, source: str, robots: int | None = Non
     if len(available) == 0:
         raise ConfigError(source, "robots.starts", "this world suggests no start poses: give some")
     if count > len(available):
-        count_field = "--robots" if robots else "robots.count"
+        count_field = robots_field if robots else "robots.count"
         raise ConfigError(
             source,
             count_field,

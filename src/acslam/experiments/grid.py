@@ -250,3 +250,29 @@ def expand(
                                 )
                             specs.setdefault(rid, spec)
     return list(specs.values())
+
+
+def check_cells(grid: ExperimentGrid, source: str, seeds: int | None = None) -> None:
+    """Build every scenario of the grid with each of its seeds and its block's largest team
+    before the first run, so that a broken scenario file or a team larger than a
+    scenario's start poses is one error naming the grid's field (``blocks.0.robots``),
+    not a sweep of failed runs. ``seeds`` overrides the blocks' as in :func:`expand`."""
+    from acslam.config import load_scenario_config
+    from acslam.errors import AcslamError
+    from acslam.scenario import build_scenario
+
+    for b, block in enumerate(grid.blocks):
+        robots_field = f"blocks.{b}.robots"
+        seed_list = list(range(seeds)) if seeds is not None else block.seeds
+        for s, scenario in enumerate(block.scenarios):
+            try:
+                config, label = load_scenario_config(scenario)
+                for seed in seed_list:
+                    seeded = config.model_copy(update={"seed": seed})
+                    build_scenario(seeded, label, max(block.robots), robots_field)
+            except ConfigError as exc:
+                if exc.field != robots_field:
+                    raise ConfigError(source, f"blocks.{b}.scenarios.{s}", str(exc)) from None
+                raise ConfigError(source, robots_field, f"{label}: {exc.problem}") from None
+            except AcslamError as exc:
+                raise ConfigError(source, f"blocks.{b}.scenarios.{s}", str(exc)) from None
