@@ -1,8 +1,10 @@
 """The ``acslam`` command line: argument parsing and the one error boundary.
 
-Every :class:`~acslam.errors.AcslamError` becomes one line on stderr and exit code 1. A
-run stopped by SIGINT or SIGTERM still writes its results and exits with 130 or 143
-(:mod:`acslam.stop`). The work itself lives in the library modules the commands call.
+Every error is one ``acslam: error: ...`` line on stderr (:class:`AcslamGroup`): exit code
+2 for a usage error (which adds one line saying where the help is), 1 for bad input (an
+:class:`~acslam.errors.AcslamError`). A run stopped by SIGINT or SIGTERM still writes its
+results and exits with 130 or 143 (:mod:`acslam.stop`). The work itself lives in the
+library modules the commands call.
 """
 
 from __future__ import annotations
@@ -205,6 +207,48 @@ def _team(team: int | list[str] | None, ros2: bool) -> tuple[int | None, list[st
     return team, None
 
 
+def _one_line(text: str) -> str:
+    return " ".join(text.split("\n"))
+
+
+class AcslamGroup(click.Group):
+    """The command group with acslam's one error format, whoever invokes it (the entry
+    point, ``python -m acslam.cli``, click's test runner)."""
+
+    def main(  # type: ignore[override]
+        self,
+        args: list[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
+        code: Any = 0
+        try:
+            # The program is acslam however it is started (``python -m``, a test runner).
+            code = super().main(args, "acslam", complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()
+            code = exc.exit_code
+        except click.UsageError as exc:
+            click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
+            if exc.ctx is not None:
+                click.echo(f"Try '{exc.ctx.command_path} --help' for help.", err=True)
+            code = exc.exit_code
+        except click.ClickException as exc:
+            click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
+            code = exc.exit_code
+        except click.exceptions.Abort:
+            click.echo("acslam: aborted", err=True)
+            code = 130
+        except AcslamError as exc:
+            click.echo(f"acslam: error: {_one_line(str(exc))}", err=True)
+            code = 1
+        if not standalone_mode:
+            return code
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 def _exit_if_stopped(signals: stop.Signals, out_dir: Path) -> None:
     """After a run a signal stopped (its results written): say so and exit 130 / 143."""
     if signals.exit_code is not None:
@@ -212,7 +256,7 @@ def _exit_if_stopped(signals: stop.Signals, out_dir: Path) -> None:
         raise click.exceptions.Exit(signals.exit_code)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=AcslamGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="acslam")
 def cli() -> None:
     """acslam: centralized multi-robot Active Collaborative SLAM on factor graphs."""
@@ -1061,19 +1105,8 @@ def robot_command(
 
 
 def main() -> None:
-    """Entry point: run the CLI behind the single AcslamError boundary."""
-    try:
-        code = cli.main(standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("acslam: aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
-    except AcslamError as exc:
-        click.echo(f"acslam: error: {exc}", err=True)
-        sys.exit(1)
-    sys.exit(code if isinstance(code, int) else 0)
+    """Entry point: the CLI behind its one error boundary (:class:`AcslamGroup`)."""
+    cli.main(prog_name="acslam")
 
 
 if __name__ == "__main__":
