@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import datetime
@@ -22,7 +23,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acslam import stop
-from acslam.errors import AcslamError
+from acslam.errors import AcslamError, AcslamWarning
 from acslam.files import output_folder
 
 if TYPE_CHECKING:
@@ -211,6 +212,25 @@ def _one_line(text: str) -> str:
     return " ".join(text.split("\n"))
 
 
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Show acslam's own warnings as one ``acslam: warning:`` line each, without the
+    source line Python adds (it is acslam's, not the input's)."""
+    previous = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, AcslamWarning):
+            click.echo(f"acslam: warning: {_one_line(str(message))}", err=True)
+        else:
+            previous(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+    try:
+        yield
+    finally:
+        warnings.showwarning = previous
+
+
 class AcslamGroup(click.Group):
     """The command group with acslam's one error format, whoever invokes it (the entry
     point, ``python -m acslam.cli``, click's test runner)."""
@@ -224,26 +244,27 @@ class AcslamGroup(click.Group):
         **extra: Any,
     ) -> Any:
         code: Any = 0
-        try:
-            # The program is acslam however it is started (``python -m``, a test runner).
-            code = super().main(args, "acslam", complete_var, standalone_mode=False, **extra)
-        except click.exceptions.NoArgsIsHelpError as exc:
-            exc.show()
-            code = exc.exit_code
-        except click.UsageError as exc:
-            click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
-            if exc.ctx is not None:
-                click.echo(f"Try '{exc.ctx.command_path} --help' for help.", err=True)
-            code = exc.exit_code
-        except click.ClickException as exc:
-            click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
-            code = exc.exit_code
-        except click.exceptions.Abort:
-            click.echo("acslam: aborted", err=True)
-            code = 130
-        except AcslamError as exc:
-            click.echo(f"acslam: error: {_one_line(str(exc))}", err=True)
-            code = 1
+        with _warnings_as_lines():
+            try:
+                # The program is acslam however it is started (``python -m``, a test runner).
+                code = super().main(args, "acslam", complete_var, standalone_mode=False, **extra)
+            except click.exceptions.NoArgsIsHelpError as exc:
+                exc.show()
+                code = exc.exit_code
+            except click.UsageError as exc:
+                click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
+                if exc.ctx is not None:
+                    click.echo(f"Try '{exc.ctx.command_path} --help' for help.", err=True)
+                code = exc.exit_code
+            except click.ClickException as exc:
+                click.echo(f"acslam: error: {_one_line(exc.format_message())}", err=True)
+                code = exc.exit_code
+            except click.exceptions.Abort:
+                click.echo("acslam: aborted", err=True)
+                code = 130
+            except AcslamError as exc:
+                click.echo(f"acslam: error: {_one_line(str(exc))}", err=True)
+                code = 1
         if not standalone_mode:
             return code
         sys.exit(code if isinstance(code, int) else 0)

@@ -14,6 +14,11 @@ class AcslamError(Exception):
     """Base class of every error acslam raises on purpose."""
 
 
+class AcslamWarning(UserWarning):
+    """Base class of acslam's warnings: input it skipped and went on without. The CLI
+    prints each as one ``acslam: warning:`` line."""
+
+
 class ConfigError(AcslamError):
     """A scenario or config is invalid: names the file and the field path."""
 

@@ -88,6 +88,7 @@ def test_unreadable_files_raise_data_error(tmp_path: Path) -> None:
         read_carmen(broken)
     binary = tmp_path / "binary.clf"
     binary.write_bytes(b"\xff\xfe\x00ODOM")
-    with pytest.raises(DataError) as info:
-        read_carmen(binary)
-    assert info.value.path == str(binary)
+    # Not ASCII, so not a CARMEN line: skipped and counted like any other malformed line.
+    with pytest.warns(CarmenWarning, match=r"binary\.clf:1: skipped non-ASCII line$"):
+        log = read_carmen(binary)
+    assert log.skipped_lines == [(1, "non-ASCII line")] and not log.records

@@ -3,9 +3,11 @@
 Only ``ODOM`` and ``FLASER`` lines are read; other messages (``PARAM``, ``SYNC``, comments)
 are ignored. Messages are not logged in time order (the Intel log steps back in time, by
 up to 0.6 s, about 600 times per message type), so records are sorted by logger timestamp.
-Real logs can also contain truncated lines, so a malformed ``ODOM``/``FLASER`` line is
-skipped, recorded with its line number and reported in one warning per line rather than
-aborting the whole log; a file that cannot be read at all raises :class:`DataError`.
+Real logs can also contain truncated lines, so a malformed ``ODOM``/``FLASER`` line, or a
+line that is not ASCII text (as the format is), is skipped and recorded with its line
+number rather than aborting the whole log, with one warning per kind of problem giving
+the count and the first line numbers; a file that cannot be read at all raises
+:class:`DataError`.
 
 Line formats (whitespace separated; timestamps are the last three fields):
 
@@ -20,22 +22,24 @@ import bz2
 import gzip
 import math
 import warnings
+from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from acslam.errors import DataError
+from acslam.errors import AcslamWarning, DataError
 
 NO_RETURN_RANGE_M = 50.0
 """SICK logs report "no return" as ~80 m; readings at or above this become ``inf``."""
 
 _ODOM_FIELDS = 10
 _FLASER_FIXED_FIELDS = 11  # tag, n, 6 pose values, 3 timestamp fields
+_LINES_NAMED = 5  # line numbers a warning lists
 
 
-class CarmenWarning(UserWarning):
-    """A line of a CARMEN log was skipped."""
+class CarmenWarning(AcslamWarning):
+    """Lines of a CARMEN log were skipped."""
 
 
 @dataclass(frozen=True)
@@ -117,17 +121,34 @@ def _parse_flaser(tokens: list[str], line: int, fov_rad: float) -> LaserRecord:
     return LaserRecord(stamp, angles, ranges, poses[0:3], poses[3:6], line, ipc_stamp)
 
 
-def _open_text(path: Path) -> list[str]:
+def _read_lines(path: Path) -> list[bytes]:
+    """The file's lines, undecoded: each is checked for ASCII on its own."""
     try:
         if path.name.endswith((".bz2", ".gz")):
             opener = bz2.open if path.name.endswith(".bz2") else gzip.open
-            with opener(path, "rt", encoding="ascii") as stream:
+            with opener(path, "rb") as stream:
                 return stream.read().splitlines()
-        return path.read_text(encoding="ascii").splitlines()
+        return path.read_bytes().splitlines()
     except FileNotFoundError:
         raise DataError(path, "log file not found") from None
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
+    except IsADirectoryError:
+        raise DataError(path, "is a folder, not a log file") from None
+    except (OSError, EOFError) as exc:
         raise DataError(path, f"cannot read log ({type(exc).__name__}: {exc})") from None
+
+
+def _warn_skipped(path: Path, skipped: list[tuple[int, str]]) -> None:
+    """One warning per kind of problem: the count and the first line numbers."""
+    lines_by_problem: dict[str, list[int]] = defaultdict(list)
+    for number, problem in skipped:
+        lines_by_problem[problem].append(number)
+    for problem, numbers in lines_by_problem.items():
+        message = f"{path}:{numbers[0]}: skipped {problem}"
+        if len(numbers) > 1:
+            named = ", ".join(str(n) for n in numbers[:_LINES_NAMED])
+            more = ", ..." if len(numbers) > _LINES_NAMED else ""
+            message += f" ({len(numbers)} lines: {named}{more})"
+        warnings.warn(message, CarmenWarning, stacklevel=3)
 
 
 def read_carmen(path: str | Path, fov_rad: float = math.pi) -> CarmenLog:
@@ -135,8 +156,11 @@ def read_carmen(path: str | Path, fov_rad: float = math.pi) -> CarmenLog:
     malformed lines. ``fov_rad``: the laser's field of view, first beam at -fov/2."""
     path = Path(path)
     log = CarmenLog(path)
-    for number, text in enumerate(_open_text(path), start=1):
-        tokens = text.split()
+    for number, raw in enumerate(_read_lines(path), start=1):
+        if not raw.isascii():
+            log.skipped_lines.append((number, "non-ASCII line"))
+            continue
+        tokens = raw.decode("ascii").split()
         if not tokens or tokens[0] not in ("ODOM", "FLASER"):
             continue
         try:
@@ -145,9 +169,8 @@ def read_carmen(path: str | Path, fov_rad: float = math.pi) -> CarmenLog:
             else:
                 log.scans.append(_parse_flaser(tokens, number, fov_rad))
         except ValueError as exc:
-            problem = f"{tokens[0]}: {exc}"
-            log.skipped_lines.append((number, problem))
-            warnings.warn(f"{path}:{number}: skipped {problem}", CarmenWarning, stacklevel=2)
+            log.skipped_lines.append((number, f"{tokens[0]}: {exc}"))
+    _warn_skipped(path, log.skipped_lines)
     log.odometry.sort(key=lambda record: record.stamp_s)
     log.scans.sort(key=lambda record: record.stamp_s)
     return log
