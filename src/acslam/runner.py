@@ -29,6 +29,7 @@ from acslam.errors import AcslamError
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
+    explored_areas,
     localization_errors,
     timing,
 )
@@ -285,8 +286,6 @@ def _metrics(
         if len(true) >= 2:  # a real robot has no ground truth to be scored against
             localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
     cell_area_m2 = scenario.world.spec.resolution_m**2
-    known = record.estimated_values != UNKNOWN
-    reachable = record.reachable
     if count > 1 and all(len(true) for true in record.true_trajectories):
         true_xy = _common_clock_xy(record.true_trajectories)
         gaps = np.linalg.norm(true_xy[:, :, None] - true_xy[:, None], axis=-1)
@@ -317,7 +316,7 @@ def _metrics(
             **coverage_by_combination(
                 dict(zip(names, record.robot_known, strict=True)), cell_area_m2
             ),
-            "explored_fraction_of_reachable": float((known & reachable).sum() / reachable.sum()),
+            **explored_areas(record.estimated_values != UNKNOWN, record.reachable, cell_area_m2),
         },
         "mapping": confusion_rates(record.true_occupied, record.estimated_values),
         "safety": {

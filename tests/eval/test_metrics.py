@@ -10,6 +10,7 @@ import pytest
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
+    explored_areas,
     localization_errors,
     timing,
 )
@@ -86,3 +87,20 @@ def test_timing_gap() -> None:
     result = timing({"robot_0": 129.7, "robot_1": 133.75})
     assert result["total_s"] == 133.75
     assert result["gap_s"] == pytest.approx(4.05)
+
+
+def test_explored_areas_of_a_tiny_grid() -> None:
+    # 3 x 4 cells of 0.25 m^2; the map knows 7 cells, the true reachable free area is 5
+    # cells, of which the map knows 3 (the other 4 known cells are walls or out of reach).
+    known = np.array([[1, 1, 1, 1], [1, 1, 0, 0], [0, 1, 0, 0]], dtype=bool)
+    reachable = np.array([[0, 1, 1, 0], [0, 0, 1, 1], [0, 1, 0, 0]], dtype=bool)
+    areas = explored_areas(known, reachable, 0.25)
+    assert areas == {
+        "mapped_area_m2": 1.75,
+        "reachable_area_m2": 1.25,
+        "mapped_reachable_area_m2": 0.75,
+        "explored_fraction_of_reachable": 0.6,
+    }
+    assert math.isnan(
+        explored_areas(known, np.zeros_like(known), 0.25)["explored_fraction_of_reachable"]
+    )

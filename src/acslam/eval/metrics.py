@@ -162,6 +162,31 @@ def timing(finish_times_s: Mapping[str, float]) -> dict[str, object]:
     }
 
 
+def explored_areas(
+    known: np.ndarray, reachable: np.ndarray, cell_area_m2: float
+) -> dict[str, float]:
+    """The explored area of a run, measured three ways, which differ by design.
+
+    ``mapped_area_m2``: every cell the team map knows (free or occupied): walls count,
+    and so do free cells the LiDAR saw where no robot fits. ``reachable_area_m2``: the
+    true free area a robot can reach from the starts (what exploring must map).
+    ``mapped_reachable_area_m2``: the part of it the map knows, which over the reachable
+    area is ``explored_fraction_of_reachable`` (NaN without a reachable cell). Table 5.3's
+    team area is a fourth: the union of each robot's own map, which can differ from the
+    team map where only the robots' scans together made a cell certain.
+    """
+    mapped_reachable = int(np.count_nonzero(known & reachable))
+    reachable_cells = int(np.count_nonzero(reachable))
+    return {
+        "mapped_area_m2": int(np.count_nonzero(known)) * cell_area_m2,
+        "reachable_area_m2": reachable_cells * cell_area_m2,
+        "mapped_reachable_area_m2": mapped_reachable * cell_area_m2,
+        "explored_fraction_of_reachable": (
+            mapped_reachable / reachable_cells if reachable_cells else math.nan
+        ),
+    }
+
+
 def pairwise_precision_recall(truth: np.ndarray, estimate: np.ndarray) -> tuple[float, float]:
     """Pairwise association scores: of the measurement pairs put on one estimated landmark,
     the fraction truly one landmark (precision); of the pairs truly one landmark, the
