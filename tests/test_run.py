@@ -33,6 +33,7 @@ METRIC_KEYS = {
     "mapping",
     "safety",
     "server_cycle_ms",
+    "provenance",
 }
 TABLE_TITLES = (
     "Timing (Table 5.1)",

@@ -38,6 +38,7 @@ from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
+from acslam.provenance import provenance
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
 from acslam.sources import DataSource
@@ -219,10 +220,11 @@ def finish_run(
     extra: dict | None = None,
 ) -> dict:
     """Score a finished run from its last snapshot and write its folder; ``extra`` adds
-    metric sections."""
+    metric sections, and ``provenance`` says what produced them."""
     record = _record(scenario, log, truth)
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
     metrics.update(extra or {})
+    metrics["provenance"] = provenance()
     _write_outputs(out_dir, scenario, record)
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=True))
     write_report(out_dir, record, metrics)
