@@ -426,7 +426,8 @@ def _print_summary(metrics: dict, reachable_m2: float) -> None:
             if loc is None
             else [f"{loc[key]:.3f}" for key in ("rmse_m", "final_dist_m", "rmse_yaw_rad")]
         )
-        table.add_row(name, f"{time_s:.1f}", *errors, f"{metrics['coverage'][name]['area_m2']:.1f}")
+        time_text = "—" if time_s is None else f"{time_s:.1f}"  # None: still exploring
+        table.add_row(name, time_text, *errors, f"{metrics['coverage'][name]['area_m2']:.1f}")
     _console.print(table)
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     _console.print(

@@ -29,6 +29,7 @@ from acslam.errors import AcslamError
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
+    exploration_times,
     explored_areas,
     localization_errors,
     timing,
@@ -277,11 +278,7 @@ def _metrics(
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
     last = log.last
-    idle_or_end = [
-        idle_s if reason == "explored" and idle_s is not None else time_s
-        for idle_s in last.idle_since_s
-    ]
-    finish = {names[i]: last.lost.get(i, end) for i, end in enumerate(idle_or_end)}
+    done_s = exploration_times(reason == "explored", last.idle_since_s, last.lost, time_s)
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
@@ -312,7 +309,7 @@ def _metrics(
         "sim_time_s": time_s,
         "wall_time_s": wall_time_s,
         "real_time_factor": time_s / max(wall_time_s, 1e-9),
-        "timing": timing(finish),
+        "timing": timing(dict(zip(names, done_s, strict=True))),
         "localization": localization,
         "coverage": {
             **coverage_by_combination(

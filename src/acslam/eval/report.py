@@ -278,6 +278,8 @@ def write_figures(out_dir: Path, record: RunRecord) -> list[Path]:
 
 
 def _number(value: object, digits: int = 3) -> str:
+    if value is None:  # no number: e.g. the exploration time of a robot still exploring
+        return "—"
     if isinstance(value, float):
         return "—" if math.isnan(value) else f"{value:.{digits}f}"
     return html.escape(str(value))
