@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acslam.errors import AcslamError
+from acslam.text import plural
 
 if TYPE_CHECKING:
     from acslam.scenario import Scenario
@@ -192,7 +193,7 @@ def scenarios_command() -> None:
     for name in builtin_scenario_names():
         config, _ = load_scenario_config(name)
         robots = config.robots.count or len(config.robots.starts or []) or 1
-        rows.append((name, config.world.generator, f"{robots} robots", config.description))
+        rows.append((name, config.world.generator, plural(robots, "robot"), config.description))
     widths = [max(len(row[k]) for row in rows) for k in range(3)]
     for row in rows:
         click.echo(
@@ -219,8 +220,9 @@ def map_command(scenario_name: str, robots: int | None, seed: int | None, out_di
     plot_world(world, scenario.starts, scenario.landmarks, out_dir / "map.png")
     click.echo(
         f"{world.name}: {world.spec.cols} x {world.spec.rows} cells at "
-        f"{world.spec.resolution_m:g} m, free {world.free_area_m2():.1f} m^2, "
-        f"{scenario.robot_count} start poses, {len(scenario.landmarks)} landmarks -> "
+        f"{world.spec.resolution_m:g} m, free {world.free_area_m2():.1f} m², "
+        f"{plural(scenario.robot_count, 'start pose')}, "
+        f"{plural(len(scenario.landmarks), 'landmark')} -> "
         f"{yaml_path.parent}"
     )
 
@@ -407,7 +409,7 @@ def _each_step(*hooks: Callable | None) -> Callable | None:
 def _print_summary(metrics: dict, reachable_m2: float) -> None:
     status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
     table = Table(
-        title=f"{metrics['scenario']}, {metrics['robots']} robots: {status} in "
+        title=f"{metrics['scenario']}, {plural(metrics['robots'], 'robot')}: {status} in "
         f"{metrics['sim_time_s']:.1f} s simulated ({metrics['real_time_factor']:.1f}x real time)"
     )
     for column in (
@@ -544,9 +546,10 @@ def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) 
     metrics = run_carmen(log, out_dir, algorithms=_algorithms(algorithms_file))
     skipped = metrics["skipped_lines"]["count"]
     click.echo(
-        f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "
-        f"{metrics['loop_closures']['accepted']} loop closures "
-        f"({metrics['loop_closures']['rejected']} rejected), {skipped} malformed lines skipped; "
+        f"{plural(metrics['scans_used'], 'scan')}, {plural(metrics['keyframes'], 'keyframe')}, "
+        f"{plural(metrics['loop_closures']['accepted'], 'loop closure')} "
+        f"({metrics['loop_closures']['rejected']} rejected), "
+        f"{plural(skipped, 'malformed line')} skipped; "
         f"{metrics['log_duration_s']:.0f} s of log in {metrics['wall_time_s']:.0f} s "
         f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
     )
@@ -622,12 +625,12 @@ def slam_rosbag_command(
         finish=finish,
     )
     robots = ", ".join(
-        f"{name}: {robot['scans_used']} scans, {robot['keyframes']} keyframes"
+        f"{name}: {plural(robot['scans_used'], 'scan')}, {plural(robot['keyframes'], 'keyframe')}"
         + (" (scan-matching odometry)" if robot["odometry"] == "scan matching" else "")
         for name, robot in metrics["robots"].items()
     )
     click.echo(
-        f"{robots}; {metrics['loop_closures']['accepted']} loop closures "
+        f"{robots}; {plural(metrics['loop_closures']['accepted'], 'loop closure')} "
         f"({metrics['loop_closures']['rejected']} rejected); "
         f"{metrics['log_duration_s']:.0f} s of bag in {metrics['wall_time_s']:.0f} s "
         f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
@@ -653,7 +656,8 @@ def convert_carmen_command(log: Path, out: Path) -> None:
 
     written = convert_carmen(log, out)
     click.echo(
-        f"{written['scans']} scans, {written['odometry_samples']} odometry samples, "
+        f"{plural(written['scans'], 'scan')}, "
+        f"{plural(written['odometry_samples'], 'odometry sample')}, "
         f"{written['duration_s']:.0f} s -> {out}"
     )
 
@@ -895,7 +899,7 @@ def serve_command(
         from acslam.distributed.server_node import ServeOptions, serve
 
         options = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
-        click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
+        click.echo(f"serving {plural(scenario.robot_count, 'robot')} on {listen} -> {out_dir}")
         metrics = serve(scenario, listen, out_dir, limit_s, options=options)
     _print_summary(metrics, scenario.reachable_area_m2)
 

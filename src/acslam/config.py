@@ -30,6 +30,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from acslam.errors import ConfigError
+from acslam.text import plural
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -587,7 +588,7 @@ def _validated(model: type[BaseModel], data: Any, source: str | Path, prefix: st
     except ValidationError as exc:
         errors = exc.errors()
         first = errors[0]
-        more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
+        more = f" (and {plural(len(errors) - 1, 'more problem')})" if len(errors) > 1 else ""
         message = first["msg"].removeprefix("Value error, ")
         field = ".".join(p for p in (prefix, _field_path(first["loc"])) if p)
         raise ConfigError(source, field, message + more) from None

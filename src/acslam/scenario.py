@@ -16,6 +16,7 @@ from acslam.config import ScenarioConfig, load_scenario_config
 from acslam.errors import ConfigError
 from acslam.seeding import Stream, rng
 from acslam.sim.simulator import Simulator
+from acslam.text import plural
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.world import World
@@ -124,7 +125,9 @@ def build_scenario(config: ScenarioConfig, source: str, robots: int | None = Non
         raise ConfigError(
             source,
             count_field,
-            f"{count} robots requested but only {len(available)} start poses are available",
+            f"{plural(count, 'robot')} requested but only "
+            f"{plural(len(available), 'start pose')} {'is' if len(available) == 1 else 'are'} "
+            "available",
         )
     starts = available[:count]
     _check_starts(starts, world, team.radius_m, source, field)

@@ -20,6 +20,7 @@ from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
 from acslam.eval.plotting import plt
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from acslam.text import plural
 
 # Thesis Fig. 5.12: green TP, white TN, blue FP, red FN (grey: not mapped).
 CONFUSION_COLOURS = {
@@ -380,8 +381,9 @@ def write_report(out_dir: Path, record: RunRecord, metrics: dict) -> Path:
     figures = write_figures(out_dir, record)
     status = "completed" if metrics["completed"] else f"not completed ({metrics['reason']})"
     summary = (
-        f"{metrics['scenario']}: {metrics['robots']} robots, planner {metrics['planner']}, "
-        f"allocator {metrics['allocator']}, seed {metrics['seed']}: {status} after "
+        f"{metrics['scenario']}: {plural(metrics['robots'], 'robot')}, "
+        f"planner {metrics['planner']}, allocator {metrics['allocator']}, "
+        f"seed {metrics['seed']}: {status} after "
         f"{metrics['sim_time_s']:.1f} s simulated in {metrics['wall_time_s']:.1f} s wall time "
         f"({metrics['real_time_factor']:.1f}x real time)."
     )
