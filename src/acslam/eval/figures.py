@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from acslam.eval.plotting import plt
+from acslam.eval.plotting import plt, save_figure
 from acslam.worlds.world import World
 
 ROBOT_COLOURS = (
@@ -93,7 +93,4 @@ def plot_world(
     ax.set_ylabel("y [m]")
     ax.set_title(world.name)
     ax.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.eval.figures import robot_colour
-from acslam.eval.plotting import plt
+from acslam.eval.plotting import plt, save_figure
 from acslam.grid import FREE, OCCUPIED, GridSpec
 
 
@@ -38,10 +38,7 @@ def plot_slam_run(
     ax.set_ylabel("y [m]")
     ax.set_title(title)
     ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def _grid_image(values: np.ndarray) -> np.ndarray:
@@ -65,8 +62,7 @@ def plot_map(
     """One occupancy map with each robot's trajectory ((N, 3)) over it."""
     fig, ax = plt.subplots(figsize=(9, 9))
     _draw_map(ax, values, spec, tracks, title)
-    fig.savefig(path, dpi=200, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, path, dpi=200)
 
 
 def plot_map_panels(
@@ -77,5 +73,4 @@ def plot_map_panels(
     fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
     for ax, panel in zip(axes, panels, strict=True):
         _draw_map(ax, *panel)
-    fig.savefig(path, dpi=150, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, path, dpi=150)
