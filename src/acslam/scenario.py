@@ -36,12 +36,6 @@ class Scenario:
     def robot_count(self) -> int:
         return len(self.starts)
 
-    @property
-    def reachable_area_m2(self) -> float:
-        """Free area a robot disc can sweep from the first start (what exploring can map)."""
-        reachable = self.world.reachable_free(*self.starts[0, :2], self.config.robots.radius_m)
-        return float(reachable.sum()) * self.world.spec.resolution_m**2
-
     def simulator(self) -> Simulator:
         """A fresh simulator of this scenario: its world, team, sensors and seed."""
         config = self.config

@@ -184,3 +184,18 @@ def test_explored_area_table_matches_metrics(short_run) -> None:
     )
     # The area figure ends at the team map's mapped area, sampled each simulated second.
     assert coverage["mapped_area_m2"] > coverage["mapped_reachable_area_m2"] > 0
+
+
+def test_console_summary_and_piped_progress_have_units(short_run) -> None:
+    lines = short_run.stdout.splitlines()
+    progress = [line for line in lines if re.search(r"s simulated \(\d+ %\)", line)]
+    # Piped: a plain line per tenth of the limit (the hook is called each simulated second).
+    assert len(progress) == 6
+    assert all(
+        re.search(r"[\d.]+ m² mapped, \d+ frontier cells?, \d+ s elapsed$", line)
+        for line in progress
+    )
+    header = next(line for line in lines if "robot" in line and "RMSE" in line)
+    for column in ("time [s]", "RMSE [m]", "final error [m]", "yaw RMSE [rad]", "area [m²]"):
+        assert column in header
+    assert "m² of reachable free area" in short_run.stdout
