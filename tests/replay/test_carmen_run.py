@@ -27,11 +27,11 @@ from click.testing import CliRunner
 
 from acslam.cli import cli
 from acslam.config import LidarConfig, RobotsConfig, SensorsConfig, SimConfig
-from acslam.datasets.carmen import CarmenWarning, read_carmen
+from acslam.datasets.carmen import CarmenWarning, laser_offset, read_carmen
 from acslam.geometry import compose, wrap_angles
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan, OdometryIncrement, VelocityCommand
-from acslam.replay.carmen import laser_offset, run_carmen
+from acslam.replay.carmen import run_carmen
 from acslam.sim.simulator import Simulator
 from acslam.trajectory import read_tum
 from acslam.worlds.mapio import load_map

@@ -29,6 +29,7 @@ from acslam.datasets.carmen import (
     CarmenLog,
     LaserRecord,
     OdometryRecord,
+    laser_offset,
     read_carmen,
 )
 from acslam.errors import DataError
@@ -38,14 +39,6 @@ from acslam.pipeline.stages import Localizer
 from acslam.replay import localize, preset
 from acslam.replay.outputs import PosedScans, ReplayMap, replay_metrics, write_maps
 from acslam.trajectory import write_tum
-
-
-def laser_offset(log: CarmenLog) -> np.ndarray:
-    """The laser pose in the robot frame: the median of ``odom^-1 * laser`` over the scans."""
-    offsets = np.array(
-        [between(s.odom_pose_xytheta, s.laser_pose_xytheta) for s in log.scans], dtype=float
-    )
-    return np.median(offsets, axis=0)
 
 
 def laser_pose(record: OdometryRecord | LaserRecord, offset: np.ndarray) -> np.ndarray:
