@@ -609,8 +609,9 @@ def slam_mrclam_command(
 def slam_carmen_command(log: Path, out_dir: Path, algorithms_file: Path | None) -> None:
     """Replay a CARMEN laser log (ODOM + FLASER, plain, .bz2 or .gz) through SLAM and mapping.
 
-    Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
-    of every scan at its optimised pose; one TUM pose per FLASER line (ipc stamps).
+    The log plays as the ROS messages `acslam convert carmen` writes of it. Sequential and
+    loop-closure scan matching in one iSAM2 graph, then the log-odds map of every scan at
+    its optimised pose; one TUM pose per FLASER line (ipc stamps).
     """
     from acslam.replay.carmen import run_carmen
 
@@ -720,8 +721,9 @@ def convert_carmen_command(log: Path, out: Path) -> None:
     """Write a CARMEN log's odometry and laser as a rosbag2 file OUT (.mcap): /scan
     (LaserScan), /odom (Odometry odom -> base_link), /tf and /tf_static (the laser mount).
 
-    At a FLASER stamp the odometry is the base pose the line's laser pose implies, so
-    `acslam slam rosbag OUT --algorithms carmen` sees the laser poses `slam carmen` sees.
+    At a FLASER stamp the odometry is the base pose the line's laser pose implies.
+    `acslam slam carmen LOG` replays these same messages, so `acslam slam rosbag OUT
+    --algorithms carmen` gives its trajectory.
     """
     from acslam.ros2.carmen_bag import convert_carmen
 

@@ -1,5 +1,7 @@
 """``acslam convert carmen``: a CARMEN log's real odometry and laser as a rosbag2 in MCAP
-storage, for Foxglove, ROS 2 tools and ``acslam slam rosbag``.
+storage, for Foxglove, ROS 2 tools and ``acslam slam rosbag``. ``acslam slam carmen``
+replays the same messages, held in memory (:class:`~acslam.ros2.bag.MemoryBag`), so the
+log enters SLAM one way, at the ROS messages' precision.
 
 One robot, topics at the root:
 
