@@ -13,14 +13,11 @@ import sys
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from acslam.config import MappingConfig
 from acslam.datasets.carmen import read_carmen
+from acslam.eval.plotting import plt, save_figure
 from acslam.mapping.occupancy import TeamMap, grid_spec_for_bounds
 
 LOG = Path(__file__).resolve().parents[2] / "shared/datasets/intel_lab_carmen/intel.clf.bz2"
@@ -58,7 +55,7 @@ def main() -> None:
     ax.imshow(image, cmap="gray", origin="lower", extent=extent, vmin=0.0, vmax=1.0)
     ax.plot(poses[:, 0], poses[:, 1], lw=0.3, color="tab:red")
     ax.set(title=f"{log_path.name}: scans at the logged poses", xlabel="x [m]", ylabel="y [m]")
-    fig.savefig(out, dpi=150, bbox_inches="tight")
+    save_figure(fig, out, dpi=150)
     print(f"wrote {out}")
 
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -55,3 +58,29 @@ def tiny_scenario(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = folder / "scenario.yaml"
     path.write_text(TINY_SCENARIO)
     return path
+
+
+SHORT_RUN_S = 6.0
+"""Simulated seconds of the shared short run: stopped by its time limit mid-exploration."""
+
+
+class ShortRun(NamedTuple):
+    folder: Path
+    stdout: str
+    command: list[str]
+
+
+@pytest.fixture(scope="session")
+def short_run(tmp_path_factory: pytest.TempPathFactory) -> ShortRun:
+    """``acslam run`` of the default scenario for a few simulated seconds, as a user starts
+    it, its output piped: a complete run folder (metrics, figures, report) in ~5 s."""
+    folder = tmp_path_factory.mktemp("short_run") / "run"
+    arguments = ["run", "--max-time", f"{SHORT_RUN_S:g}", "--out", str(folder)]
+    done = subprocess.run(
+        [sys.executable, "-m", "acslam.cli", *arguments],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    return ShortRun(folder, done.stdout, ["acslam", *arguments])

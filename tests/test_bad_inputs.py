@@ -341,7 +341,7 @@ def test_a_run_of_any_length_ends_in_its_metrics(
     assert list(metrics["localization"]) == (names if scored else [])
     assert (out / "report.html").is_file() and (out / "figures" / "map.png").is_file()
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert ("localization of robot_0: no ground truth" in page) is not scored
+    assert ("Not scored (no ground truth" in page) is not scored
 
 
 SHORT_OPTIONS = {
@@ -622,7 +622,7 @@ def test_a_one_robot_runs_metrics_are_strict_json(finished_run: Path) -> None:
     metrics = json.loads((finished_run / "metrics.json").read_text(), parse_constant=refuse)
     assert metrics["robots"] == 1 and metrics["safety"]["min_robot_distance_m"] is None
     page = (finished_run / "report.html").read_text(encoding="utf-8")
-    assert "minimum robot distance: a single robot has no other" in page
+    assert "distance: one robot has no other to come close to" in page
 
 
 # --------------------------------------------------------------------------- atomic writes

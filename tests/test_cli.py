@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -15,13 +16,80 @@ from acslam.config import builtin_scenario_names
 from acslam.worlds.mapio import load_map
 
 
-@pytest.mark.parametrize(
-    "command", [[], ["scenarios"], ["map"], ["run"], ["report"], ["slam"], ["slam", "mrclam"]]
-)
-def test_every_command_has_help(command: list[str]) -> None:
-    result = CliRunner().invoke(cli, [*command, "--help"])
+def _command_paths(group: click.Group = cli, prefix: tuple[str, ...] = ()) -> list[list[str]]:
+    """Every command and group of the CLI, as the words that call it."""
+    paths = [list(prefix)]
+    for name, command in group.commands.items():
+        if isinstance(command, click.Group):
+            paths += _command_paths(command, (*prefix, name))
+        else:
+            paths.append([*prefix, name])
+    return paths
+
+
+COMMANDS = _command_paths()
+
+
+def _help(command: list[str]) -> str:
+    # 80 columns, as click lays out help on a usual terminal.
+    result = CliRunner().invoke(cli, [*command, "--help"], env={"COLUMNS": "80"})
     assert result.exit_code == 0, result.output
-    assert "Usage:" in result.output
+    return result.output
+
+
+def _option_help(command: list[str], option: str) -> str:
+    """The help text of ``option`` of ``command``, on one line."""
+    group: click.Command = cli
+    for name in command:
+        group = group.commands[name]  # type: ignore[attr-defined]
+    (param,) = [p for p in group.params if option in p.opts]
+    return " ".join(param.help.split())
+
+
+@pytest.mark.parametrize("command", COMMANDS, ids=lambda c: " ".join(c) or "acslam")
+def test_every_command_has_help_with_whole_descriptions(command: list[str]) -> None:
+    output = _help(command)
+    assert "Usage:" in output
+    if "Commands:" in output:
+        listing = output.split("Commands:", 1)[1].strip().splitlines()
+        assert listing, output
+        for line in listing:
+            assert not line.rstrip().endswith("..."), f"cut description: {line.strip()}"
+
+
+@pytest.mark.parametrize(
+    ("command", "seconds"),
+    [
+        (["run"], "Simulated seconds"),
+        (["serve"], "Wall-clock seconds"),
+        (["robot"], "Seconds on the robot's simulated clock, which runs in real time"),
+        (["slam", "mrclam"], "Seconds of the recording's own clock"),
+        (["experiments", "thesis"], "Simulated seconds per run"),
+        (["experiments", "grid"], "Simulated seconds per run"),
+    ],
+)
+def test_max_time_says_which_seconds(command: list[str], seconds: str) -> None:
+    assert _option_help(command, "--max-time").startswith(seconds)
+
+
+@pytest.mark.parametrize(
+    ("command", "option", "says"),
+    [
+        (["run"], "--drop-rate", "needs --distributed; not with --ros2"),
+        (["run"], "--latency-ms", "needs --distributed; not with --ros2"),
+        (["robot"], "--drop-rate", "not with --ros2"),
+        (["run"], "--viz-out", "needs --viz rerun"),
+        (["run"], "--robots", "[default: the scenario's robots.count"),
+        (["map"], "--robots", "[default: the scenario's robots.count"),
+        (["run"], "--seed", "[default: the scenario's seed]"),
+        (["serve"], "--seed", "[default: the scenario's seed]"),
+        (["serve"], "--robots", "[default: the scenario's robots"),
+    ],
+)
+def test_options_say_what_they_need_and_default_to(
+    command: list[str], option: str, says: str
+) -> None:
+    assert says in _option_help(command, option)
 
 
 def test_scenarios_lists_every_builtin_once() -> None:

@@ -33,14 +33,16 @@ METRIC_KEYS = {
     "mapping",
     "safety",
     "server_cycle_ms",
+    "provenance",
 }
 TABLE_TITLES = (
     "Timing (Table 5.1)",
     "Localization (Table 5.2)",
     "Coverage per robot combination (Table 5.3)",
+    "Explored area",
     "Mapping accuracy (Table 5.4)",
     "Safety",
-    "Server cycle [ms]",
+    "Server cycle time",
 )
 
 

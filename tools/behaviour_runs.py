@@ -17,8 +17,10 @@ from pathlib import Path
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "datasets"
 
-# Fields that measure the machine, not the computation.
+# Fields that measure the machine, not the computation, and what records when and how a
+# run was made.
 WALL_CLOCK_KEYS = {
+    "provenance",
     "wall_time_s",
     "real_time_factor",
     "server_cycle_ms",

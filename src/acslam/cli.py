@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -20,11 +21,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from acslam import stop
 from acslam.errors import AcslamError, AcslamWarning
 from acslam.files import output_folder
+from acslam.text import plural
 
 if TYPE_CHECKING:
     from acslam.scenario import Scenario
@@ -44,10 +47,14 @@ robots_option = click.option(
     "--robots",
     type=click.IntRange(min=1),
     default=None,
-    help="Number of robots: the first N start poses of the scenario.",
+    help="Number of robots: the first N start poses of the scenario [default: the scenario's "
+    "robots.count, else all its start poses].",
 )
 seed_option = click.option(
-    "--seed", type=click.IntRange(min=0), default=None, help="Override the scenario seed."
+    "--seed",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Seed of the world, the landmarks and every noise stream [default: the scenario's seed].",
 )
 
 
@@ -103,32 +110,38 @@ def out_option(help_text: str, required: bool = False) -> Callable:
 
 
 def max_time_option(help_text: str) -> Callable:
-    """--max-time SECONDS; what the seconds are (simulated, wall, log) is the help's."""
+    """--max-time SECONDS; which seconds (simulated, wall-clock, log) the help must say."""
     return click.option(
         "--max-time",
         "max_time_s",
         type=FiniteFloatRange(min=0, min_open=True),
         default=None,
+        metavar="SECONDS",
         help=help_text,
     )
 
 
-def fault_options(command: Callable) -> Callable:
-    """--drop-rate and --latency-ms: faults a robot agent injects into its sensor messages."""
-    command = click.option(
-        "--latency-ms",
-        type=FiniteFloatRange(min=0, max=60000, max_open=True),
-        default=0.0,
-        show_default=True,
-        help="Delay added to every sensor message a robot sends.",
-    )(command)
-    return click.option(
-        "--drop-rate",
-        type=FiniteFloatRange(min=0, max=1, max_open=True),
-        default=0.0,
-        show_default=True,
-        help="Fraction of sensor messages a robot drops (seeded).",
-    )(command)
+def fault_options(needs: str) -> Callable:
+    """--drop-rate and --latency-ms: faults a robot agent injects into its sensor messages;
+    ``needs`` says what else the command needs for them."""
+
+    def add(command: Callable) -> Callable:
+        command = click.option(
+            "--latency-ms",
+            type=FiniteFloatRange(min=0, max=60000, max_open=True),
+            default=0.0,
+            show_default=True,
+            help=f"Milliseconds of delay added to every sensor message a robot sends ({needs}).",
+        )(command)
+        return click.option(
+            "--drop-rate",
+            type=FiniteFloatRange(min=0, max=1, max_open=True),
+            default=0.0,
+            show_default=True,
+            help=f"Fraction of sensor messages a robot drops, seeded ({needs}).",
+        )(command)
+
+    return add
 
 
 class TeamParam(click.ParamType):
@@ -292,7 +305,7 @@ def scenarios_command() -> None:
     for name in builtin_scenario_names():
         config, _ = load_scenario_config(name)
         robots = config.robots.count or len(config.robots.starts or []) or 1
-        rows.append((name, config.world.generator, f"{robots} robots", config.description))
+        rows.append((name, config.world.generator, plural(robots, "robot"), config.description))
     widths = [max(len(row[k]) for row in rows) for k in range(3)]
     for row in rows:
         click.echo(
@@ -322,13 +335,14 @@ def map_command(
         plot_world(world, scenario.starts, scenario.landmarks, out_dir / "map.png")
     click.echo(
         f"{world.name}: {world.spec.cols} x {world.spec.rows} cells at "
-        f"{world.spec.resolution_m:g} m, free {world.free_area_m2():.1f} m^2, "
-        f"{scenario.robot_count} start poses, {len(scenario.landmarks)} landmarks -> "
+        f"{world.spec.resolution_m:g} m, free {world.free_area_m2():.1f} m², "
+        f"{plural(scenario.robot_count, 'start pose')}, "
+        f"{plural(len(scenario.landmarks), 'landmark')} -> "
         f"{yaml_path.parent}"
     )
 
 
-@cli.command("run")
+@cli.command("run", short_help="Explore a scenario with the server in the loop.")
 @scenario_option
 @robots_option
 @seed_option
@@ -345,34 +359,40 @@ def map_command(
     help="Frontier allocator [default: the scenario's algorithms.allocator, factor-graph].",
 )
 @out_option("Run folder [default: runs/<scenario>-<time>].")
-@max_time_option("Simulated seconds before the run stops [default: the scenario's sim.max_time_s].")
+@max_time_option(
+    "Simulated seconds before the run stops; with --distributed the robots simulate in real "
+    "time, so these are wall-clock seconds too [default: the scenario's sim.max_time_s]."
+)
 @click.option(
     "--distributed",
     is_flag=True,
     help="Server here and one `acslam robot` process per robot over Zenoh on loopback, "
     "in real time.",
 )
-@fault_options
+@fault_options("needs --distributed; not with --ros2")
 @ros2_options
 @click.option(
     "--viz",
     type=click.Choice(["none", "rerun"]),
     default="none",
     show_default=True,
-    help="Log map, costmap, scans, trajectories, frontiers, goals and paths to Rerun.",
+    help="Log map, costmap, scans, trajectories, frontiers, goals and paths to Rerun (needs "
+    "the viz extra: pip install 'acslam[viz]').",
 )
 @click.option(
     "--viz-out",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="Write the Rerun recording to this .rrd file [default: spawn a live viewer].",
+    help="Write the Rerun recording to this .rrd file (needs --viz rerun) [default: spawn a "
+    "live viewer].",
 )
 @click.option(
     "--record",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
     help="Record the run as a ROS 2 bag (rosbag2, MCAP storage) in this .mcap file: per "
-    "robot scan, odom, landmarks, tf, tf_static, cmd_vel and ground_truth, and /map.",
+    "robot scan, odom, landmarks, tf, tf_static, cmd_vel and ground_truth, and /map (not with "
+    "--distributed).",
 )
 def run_command(
     scenario_name: str,
@@ -395,8 +415,6 @@ def run_command(
     record: Path | None,
 ) -> None:
     """Explore a scenario with the full server in the loop and write the run folder."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
     from acslam.runner import RunHooks, run_exploration
     from acslam.scenario import load_scenario
 
@@ -418,54 +436,34 @@ def run_command(
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"
     limit_s = max_time_s if max_time_s is not None else scenario.config.sim.max_time_s
-    reachable_m2 = scenario.reachable_area_m2
     with (
         stop.on_signals() as signals,
         output_folder(out_dir, overwrite=overwrite),
-        Progress(
-            TextColumn("[progress.description]{task.description}"),
-            BarColumn(),
-            TextColumn(
-                "{task.fields[sim]:>6.1f} s sim  explored {task.fields[explored]:>5.1f} m²"
-                "  frontiers {task.fields[frontiers]:>5}"
-            ),
-            TimeElapsedColumn(),
-            console=_console,
-        ) as progress,
+        _progress(scenario.config.name, limit_s) as show,
+        _visualizer(viz, viz_out, scenario) as on_step,
+        _recorder(record, scenario) as bag,
     ):
-        task = progress.add_task(
-            scenario.config.name, total=limit_s, sim=0.0, explored=0.0, frontiers=0
+        hooks = RunHooks(
+            on_progress=show,
+            on_step=_each_step(on_step, None if bag is None else bag.on_step),
+            on_finish=None if bag is None else bag.on_finish,
         )
+        if distributed:
+            from acslam.distributed.launch import run_distributed
+            from acslam.distributed.robot_node import RobotOptions
+            from acslam.transport.zenoh_link import FaultInjection
 
-        def show(snapshot, time_s: float, explored_m2: float) -> None:
-            progress.update(
-                task,
-                completed=time_s,
-                sim=time_s,
-                explored=explored_m2,
-                frontiers=len(snapshot.frontier_cells),
-            )
-
-        with _visualizer(viz, viz_out, scenario) as on_step, _recorder(record, scenario) as bag:
-            hooks = RunHooks(
-                on_progress=show,
-                on_step=_each_step(on_step, None if bag is None else bag.on_step),
-                on_finish=None if bag is None else bag.on_finish,
-            )
-            if distributed:
-                from acslam.distributed.launch import run_distributed
-                from acslam.distributed.robot_node import RobotOptions
-                from acslam.transport.zenoh_link import FaultInjection
-
-                options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
-                metrics = run_distributed(
-                    scenario, scenario_name, out_dir, limit_s, robot_options=options,
-                    ros2=_ros2(distro, attachment, domain_id) if ros2 else None, hooks=hooks,
-                )  # fmt: skip
-            else:
-                metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
-    _print_summary(metrics, reachable_m2)
-    _console.print(f"run folder: {out_dir}  (report: {out_dir / 'report.html'})")
+            options = RobotOptions(faults=FaultInjection(drop_rate, latency_ms / 1000))
+            metrics = run_distributed(
+                scenario, scenario_name, out_dir, limit_s, robot_options=options,
+                ros2=_ros2(distro, attachment, domain_id) if ros2 else None, hooks=hooks,
+            )  # fmt: skip
+        else:
+            metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
+    _print_summary(metrics)
+    _console.print(
+        f"run folder: {out_dir}  (report: {out_dir / 'report.html'})", markup=False, soft_wrap=True
+    )
     _exit_if_stopped(signals, out_dir)
 
 
@@ -513,17 +511,81 @@ def _each_step(*hooks: Callable | None) -> Callable | None:
     return each
 
 
-def _percent(fraction: float | None) -> str:
+def _percent(fraction: float | None, digits: int = 1) -> str:
     """A fraction as a percentage; a rate with nothing to count (null) as a dash."""
-    return "—" if fraction is None else f"{100 * fraction:.1f} %"
+    return "—" if fraction is None else f"{100 * fraction:.{digits}f} %"
 
 
-def _print_summary(metrics: dict, reachable_m2: float) -> None:
+PLAIN_PROGRESS_SHARE = 0.1
+"""Piped or redirected, a run prints a line each time it passes another tenth of its limit,"""
+PLAIN_PROGRESS_WALL_S = 30.0
+"""... or after this many wall-clock seconds without a line, whichever comes first."""
+
+
+@contextmanager
+def _progress(name: str, limit_s: float) -> Iterator[Callable]:
+    """The run's progress hook (snapshot, simulated s, mapped m²): a live bar on a
+    terminal; elsewhere (a log file, a pipe) a live bar would leave one stale line, so
+    plain lines instead."""
+    if _console.is_terminal:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        with Progress(
+            TextColumn("{task.description}", markup=False),
+            BarColumn(),
+            TextColumn(
+                "{task.fields[sim]:>6.1f} s simulated  {task.fields[explored]:>6.1f} m² mapped"
+                "  {task.fields[frontiers]:>6} frontier cells",
+                markup=False,
+            ),
+            TimeElapsedColumn(),
+            console=_console,
+        ) as progress:
+            task = progress.add_task(name, total=limit_s, sim=0.0, explored=0.0, frontiers=0)
+
+            def show(snapshot, time_s: float, explored_m2: float) -> None:
+                progress.update(
+                    task,
+                    completed=time_s,
+                    sim=time_s,
+                    explored=explored_m2,
+                    frontiers=len(snapshot.frontier_cells),
+                )
+
+            yield show
+        return
+    started_s = last_line_s = time.monotonic()
+    last_share = 0
+
+    def show_line(snapshot, time_s: float, explored_m2: float) -> None:
+        nonlocal last_line_s, last_share
+        now_s = time.monotonic()
+        share = math.floor(time_s / (PLAIN_PROGRESS_SHARE * limit_s))
+        if share <= last_share and now_s - last_line_s < PLAIN_PROGRESS_WALL_S:
+            return
+        last_line_s, last_share = now_s, max(share, last_share)
+        click.echo(
+            f"{name}: {time_s:.0f} of {limit_s:g} s simulated ({100 * time_s / limit_s:.0f} %), "
+            f"{explored_m2:.1f} m² mapped, "
+            f"{plural(len(snapshot.frontier_cells), 'frontier cell')}, "
+            f"{now_s - started_s:.0f} s elapsed"
+        )
+
+    yield show_line
+
+
+def _print_summary(metrics: dict) -> None:
+    """The run's outcome and its main numbers, each with its unit."""
     status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
-    table = Table(
-        title=f"{metrics['scenario']}, {metrics['robots']} robots: {status} in "
-        f"{metrics['sim_time_s']:.1f} s simulated ({metrics['real_time_factor']:.1f}x real time)"
+    _console.print(
+        f"{metrics['scenario']}, {plural(metrics['robots'], 'robot')}: {status} in "
+        f"{metrics['sim_time_s']:.1f} s simulated ({metrics['real_time_factor']:.1f}x real time)",
+        markup=False,
+        soft_wrap=True,
     )
+    per_robot_s = metrics["timing"]["per_robot_s"]
+    unfinished = None in per_robot_s.values()
+    table = Table(caption="time —: still exploring when the run stopped" if unfinished else None)
     for column in (
         "robot",
         "time [s]",
@@ -532,28 +594,35 @@ def _print_summary(metrics: dict, reachable_m2: float) -> None:
         "yaw RMSE [rad]",
         "area [m²]",
     ):
-        table.add_column(column, justify="right")
-    for name, time_s in metrics["timing"]["per_robot_s"].items():
+        # Square brackets are rich markup: unescaped, "[s]" would vanish as a style tag.
+        table.add_column(escape(column), justify="right")
+    for name, time_s in per_robot_s.items():
         loc = metrics["localization"].get(name)  # none without ground truth (real robots)
         errors = (
             ["-"] * 3
             if loc is None
             else [f"{loc[key]:.3f}" for key in ("rmse_m", "final_dist_m", "rmse_yaw_rad")]
         )
-        table.add_row(name, f"{time_s:.1f}", *errors, f"{metrics['coverage'][name]['area_m2']:.1f}")
+        time_text = "—" if time_s is None else f"{time_s:.1f}"
+        area_m2 = metrics["coverage"][name]["area_m2"]
+        table.add_row(escape(name), time_text, *errors, f"{area_m2:.1f}")
     _console.print(table)
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     _console.print(
-        f"explored {_percent(coverage['explored_fraction_of_reachable'])} of the "
-        f"{reachable_m2:.1f} m² reachable; map accuracy {_percent(mapping['accuracy'])}, "
-        f"TPR {_percent(mapping['tpr'])}; collisions: {safety['obstacle_collisions']} wall, "
-        f"{safety['robot_collisions']} robot; stuck events {safety['stuck_events']}; "
-        f"server cycle {metrics['server_cycle_ms']['mean']:.1f} ms mean, "
-        f"{metrics['server_cycle_ms']['p95']:.1f} ms p95"
+        f"explored {_percent(coverage['explored_fraction_of_reachable'], 2)} of the "
+        f"{coverage['reachable_area_m2']:.1f} m² of reachable free area (the team map holds "
+        f"{coverage['mapped_area_m2']:.1f} m², walls included); map accuracy "
+        f"{_percent(mapping['accuracy'])}, TPR {_percent(mapping['tpr'])}; collisions: "
+        f"{safety['obstacle_collisions']} with walls, {safety['robot_collisions']} between "
+        f"robots; {plural(safety['stuck_events'], 'stuck event')}; server cycle "
+        f"{metrics['server_cycle_ms']['mean']:.1f} ms mean, "
+        f"{metrics['server_cycle_ms']['p95']:.1f} ms p95",
+        markup=False,
+        soft_wrap=True,
     )
 
 
-@cli.command("report")
+@cli.command("report", short_help="Rebuild a run's report.html and figures/ from its files.")
 @click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
 def report_command(run_dir: Path) -> None:
     """Rebuild report.html and figures/ of a finished run without re-running it."""
@@ -562,7 +631,7 @@ def report_command(run_dir: Path) -> None:
     click.echo(f"report: {rebuild_report(run_dir)}")
 
 
-@cli.group("slam")
+@cli.group("slam", short_help="Replay real recordings through SLAM and score them.")
 def slam_group() -> None:
     """Replay real recordings through the localizer stage and score them."""
 
@@ -591,7 +660,7 @@ def _algorithms(name_or_path: Path | None):
     return None if name_or_path is None else algorithms_config(name_or_path)
 
 
-@slam_group.command("mrclam")
+@slam_group.command("mrclam", short_help="Localize the 5 robots of a UTIAS MRCLAM dataset.")
 @click.argument("path", type=click.Path(file_okay=False, path_type=Path))
 @out_option("Folder for metrics.json, TUM trajectories and trajectories.png.", required=True)
 @click.option(
@@ -599,7 +668,9 @@ def _algorithms(name_or_path: Path | None):
     is_flag=True,
     help="Reference mode: use the barcodes as landmark identities instead of PDA.",
 )
-@max_time_option("Use only the first SECONDS of the recording [default: all of it].")
+@max_time_option(
+    "Seconds of the recording's own clock: use only its first SECONDS [default: all of it]."
+)
 @click.option(
     "--inter-robot/--no-inter-robot",
     default=True,
@@ -642,7 +713,7 @@ def slam_mrclam_command(
     )
 
 
-@slam_group.command("carmen")
+@slam_group.command("carmen", short_help="Replay a CARMEN laser log through SLAM and mapping.")
 @click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 @out_option(
     "Folder for trajectory.tum, map.yaml/.pgm/.png, odometry_vs_slam.png, metrics.json.",
@@ -654,8 +725,9 @@ def slam_carmen_command(
 ) -> None:
     """Replay a CARMEN laser log (ODOM + FLASER, plain, .bz2 or .gz) through SLAM and mapping.
 
-    Sequential and loop-closure scan matching in one iSAM2 graph, then the log-odds map
-    of every scan at its optimised pose; one TUM pose per FLASER line (ipc stamps).
+    The log plays as the ROS messages `acslam convert carmen` writes of it. Sequential and
+    loop-closure scan matching in one iSAM2 graph, then the log-odds map of every scan at
+    its optimised pose; one TUM pose per FLASER line (ipc stamps).
     """
     from acslam.replay.carmen import run_carmen
 
@@ -664,9 +736,10 @@ def slam_carmen_command(
         metrics = run_carmen(log, out_dir, algorithms=algorithms)
     skipped = metrics["skipped_lines"]["count"]
     click.echo(
-        f"{metrics['scans_used']} scans, {metrics['keyframes']} keyframes, "
-        f"{metrics['loop_closures']['accepted']} loop closures "
-        f"({metrics['loop_closures']['rejected']} rejected), {skipped} malformed lines skipped; "
+        f"{plural(metrics['scans_used'], 'scan')}, {plural(metrics['keyframes'], 'keyframe')}, "
+        f"{plural(metrics['loop_closures']['accepted'], 'loop closure')} "
+        f"({metrics['loop_closures']['rejected']} rejected), "
+        f"{plural(skipped, 'malformed line')} skipped; "
         f"{metrics['log_duration_s']:.0f} s of log in {metrics['wall_time_s']:.0f} s "
         f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
     )
@@ -682,7 +755,7 @@ def _namespaces(ctx: click.Context, param: click.Parameter, value: str | None) -
     return names
 
 
-@slam_group.command("rosbag")
+@slam_group.command("rosbag", short_help="Replay a ROS 1 or ROS 2 bag through SLAM and mapping.")
 @click.argument("bag", type=click.Path(path_type=Path))
 @out_option(
     "Folder for trajectory.tum (trajectory_<ns>.tum per robot), map.yaml/.pgm/.png, "
@@ -745,12 +818,12 @@ def slam_rosbag_command(
             finish=finish,
         )
     robots = ", ".join(
-        f"{name}: {robot['scans_used']} scans, {robot['keyframes']} keyframes"
+        f"{name}: {plural(robot['scans_used'], 'scan')}, {plural(robot['keyframes'], 'keyframe')}"
         + (" (scan-matching odometry)" if robot["odometry"] == "scan matching" else "")
         for name, robot in metrics["robots"].items()
     )
     click.echo(
-        f"{robots}; {metrics['loop_closures']['accepted']} loop closures "
+        f"{robots}; {plural(metrics['loop_closures']['accepted'], 'loop closure')} "
         f"({metrics['loop_closures']['rejected']} rejected); "
         f"{metrics['log_duration_s']:.0f} s of bag in {metrics['wall_time_s']:.0f} s "
         f"({metrics['real_time_factor']:.1f}x real time) -> {out_dir}"
@@ -762,26 +835,28 @@ def convert_group() -> None:
     """Write recordings as ROS 2 bags (rosbag2 in MCAP storage)."""
 
 
-@convert_group.command("carmen")
+@convert_group.command("carmen", short_help="Write a CARMEN log as a rosbag2 file (.mcap).")
 @click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 @click.argument("out", type=click.Path(dir_okay=False, path_type=Path))
 def convert_carmen_command(log: Path, out: Path) -> None:
     """Write a CARMEN log's odometry and laser as a rosbag2 file OUT (.mcap): /scan
     (LaserScan), /odom (Odometry odom -> base_link), /tf and /tf_static (the laser mount).
 
-    At a FLASER stamp the odometry is the base pose the line's laser pose implies, so
-    `acslam slam rosbag OUT --algorithms carmen` sees the laser poses `slam carmen` sees.
+    At a FLASER stamp the odometry is the base pose the line's laser pose implies.
+    `acslam slam carmen LOG` replays these same messages, so `acslam slam rosbag OUT
+    --algorithms carmen` gives its trajectory.
     """
     from acslam.ros2.carmen_bag import convert_carmen
 
     written = convert_carmen(log, out)
     click.echo(
-        f"{written['scans']} scans, {written['odometry_samples']} odometry samples, "
+        f"{plural(written['scans'], 'scan')}, "
+        f"{plural(written['odometry_samples'], 'odometry sample')}, "
         f"{written['duration_s']:.0f} s -> {out}"
     )
 
 
-@cli.group("experiments")
+@cli.group("experiments", short_help="Sweep grids of runs; summarize them like thesis chapter 5.")
 def experiments_group() -> None:
     """Sweep grids of runs in parallel and summarize them like thesis chapter 5."""
 
@@ -840,7 +915,7 @@ def _sweep_and_summarize(
     _exit_if_stopped(signals, out_dir)
 
 
-@experiments_group.command("thesis")
+@experiments_group.command("thesis", short_help="Reproduce thesis §5.5 and compare the algorithms.")
 @_sweep_options
 @click.option(
     "--seeds", type=click.IntRange(min=1), default=1, show_default=True, help="Seeds per cell."
@@ -872,7 +947,7 @@ def experiments_thesis_command(
     _sweep_and_summarize(specs, out_dir, overwrite, executor, title)
 
 
-@experiments_group.command("grid")
+@experiments_group.command("grid", short_help="Run the grid of a YAML file and summarize it.")
 @click.argument("grid_file", type=click.Path(dir_okay=False, path_type=Path))
 @_sweep_options
 def experiments_grid_command(
@@ -887,7 +962,7 @@ def experiments_grid_command(
     _sweep_and_summarize(specs, out_dir, overwrite, executor, f"acslam experiments: {grid.name}")
 
 
-@cli.command("bench")
+@cli.command("bench", short_help="Time every module against a same-process reference.")
 @click.option(
     "--out",
     "out_dir",
@@ -906,7 +981,7 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     _console.print(f"bench: {write_json(results, out_dir)}")
 
 
-@cli.command("serve")
+@cli.command("serve", short_help="Run the server in wall-clock time for robots over Zenoh.")
 @scenario_option
 @team_option
 @seed_option
@@ -1038,13 +1113,13 @@ def serve_command(
             from acslam.distributed.server_node import ServeOptions, serve
 
             served = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
-            click.echo(f"serving {scenario.robot_count} robots on {listen} -> {out_dir}")
+            click.echo(f"serving {plural(scenario.robot_count, 'robot')} on {listen} -> {out_dir}")
             metrics = serve(scenario, listen, out_dir, limit_s, options=served)
-    _print_summary(metrics, scenario.reachable_area_m2)
+    _print_summary(metrics)
     _exit_if_stopped(signals, out_dir)
 
 
-@cli.command("robot")
+@cli.command("robot", short_help="Run one simulated robot in real time against a server.")
 @scenario_option
 @team_option
 @seed_option
@@ -1054,8 +1129,11 @@ def serve_command(
     required=True,
     help="The server's Zenoh endpoint, e.g. tcp/10.0.0.5:7447 (with --ros2: the router's).",
 )
-@max_time_option("Seconds before the robot stops [default: the scenario's sim.max_time_s].")
-@fault_options
+@max_time_option(
+    "Seconds on the robot's simulated clock, which runs in real time, before it stops "
+    "[default: the scenario's sim.max_time_s]."
+)
+@fault_options("not with --ros2")
 @click.option(
     "--command-timeout",
     "command_timeout_s",

@@ -30,6 +30,7 @@ from pydantic_core import PydanticCustomError
 
 from acslam.errors import ConfigError
 from acslam.files import parse_yaml, read_text, read_yaml
+from acslam.text import plural
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -615,7 +616,7 @@ def validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str
     except ValidationError as exc:
         errors = exc.errors()
         first = errors[0]
-        more = f" (and {len(errors) - 1} more problems)" if len(errors) > 1 else ""
+        more = f" (and {plural(len(errors) - 1, 'more problem')})" if len(errors) > 1 else ""
         message = first["msg"].removeprefix("Value error, ")
         field = ".".join(p for p in (prefix, _field_path(first["loc"])) if p)
         raise ConfigError(source, field, message + more) from None

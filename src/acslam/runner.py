@@ -28,6 +28,8 @@ from acslam.errors import AcslamError
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
+    exploration_times,
+    explored_areas,
     localization_errors,
     timing,
 )
@@ -37,6 +39,7 @@ from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
+from acslam.provenance import provenance
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
 from acslam.sources import DataSource
@@ -222,11 +225,12 @@ def finish_run(
     extra: dict | None = None,
 ) -> dict:
     """Score a finished run from its last snapshot and write its folder; ``extra`` adds
-    metric sections. Returns the metrics as written: a figure that has no value (no other
-    robot to keep a distance from, a rate without cells) is None, JSON's ``null``."""
+    metric sections, and ``provenance`` says what produced them. Returns the metrics as
+    written: a figure that has no value (no other robot to keep a distance from, a rate
+    without cells) is None, JSON's ``null``."""
     record = _record(scenario, log, truth)
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
-    metrics = strict_json({**metrics, **(extra or {})})
+    metrics = strict_json({**metrics, **(extra or {}), "provenance": provenance()})
     _write_outputs(out_dir, scenario, record)
     write_json(out_dir / "metrics.json", metrics)
     write_report(out_dir, record, metrics)
@@ -279,11 +283,7 @@ def _metrics(
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
     last = log.last
-    idle_or_end = [
-        idle_s if reason == "explored" and idle_s is not None else time_s
-        for idle_s in last.idle_since_s
-    ]
-    finish = {names[i]: last.lost.get(i, end) for i, end in enumerate(idle_or_end)}
+    done_s = exploration_times(reason == "explored", last.idle_since_s, last.lost, time_s)
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
@@ -292,8 +292,6 @@ def _metrics(
         if len(true) >= 2 and np.any((est[:, 0] >= true[0, 0]) & (est[:, 0] <= true[-1, 0])):
             localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
     cell_area_m2 = scenario.world.spec.resolution_m**2
-    known = record.estimated_values != UNKNOWN
-    reachable = record.reachable
     if count > 1 and all(len(true) for true in record.true_trajectories):
         true_xy = _common_clock_xy(record.true_trajectories)
         gaps = np.linalg.norm(true_xy[:, :, None] - true_xy[:, None], axis=-1)
@@ -318,13 +316,13 @@ def _metrics(
         "sim_time_s": time_s,
         "wall_time_s": wall_time_s,
         "real_time_factor": time_s / max(wall_time_s, 1e-9),
-        "timing": timing(finish),
+        "timing": timing(dict(zip(names, done_s, strict=True))),
         "localization": localization,
         "coverage": {
             **coverage_by_combination(
                 dict(zip(names, record.robot_known, strict=True)), cell_area_m2
             ),
-            "explored_fraction_of_reachable": float((known & reachable).sum() / reachable.sum()),
+            **explored_areas(record.estimated_values != UNKNOWN, record.reachable, cell_area_m2),
         },
         "mapping": confusion_rates(record.true_occupied, record.estimated_values),
         "safety": {

@@ -16,6 +16,7 @@ from acslam.config import ScenarioConfig, load_scenario_config
 from acslam.errors import ConfigError
 from acslam.seeding import Stream, rng
 from acslam.sim.simulator import Simulator
+from acslam.text import plural
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.limits import check_world_grid
@@ -35,12 +36,6 @@ class Scenario:
     @property
     def robot_count(self) -> int:
         return len(self.starts)
-
-    @property
-    def reachable_area_m2(self) -> float:
-        """Free area a robot disc can sweep from the first start (what exploring can map)."""
-        reachable = self.world.reachable_free(*self.starts[0, :2], self.config.robots.radius_m)
-        return float(reachable.sum()) * self.world.spec.resolution_m**2
 
     def simulator(self) -> Simulator:
         """A fresh simulator of this scenario: its world, team, sensors and seed."""
@@ -130,7 +125,9 @@ def build_scenario(
         raise ConfigError(
             source,
             count_field,
-            f"{count} robots requested but only {len(available)} start poses are available",
+            f"{plural(count, 'robot')} requested but only "
+            f"{plural(len(available), 'start pose')} {'is' if len(available) == 1 else 'are'} "
+            "available",
         )
     starts = available[:count]
     _check_starts(starts, world, team.radius_m, source, field)

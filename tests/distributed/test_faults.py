@@ -38,6 +38,7 @@ METRIC_KEYS = {
     "mapping",
     "safety",
     "server_cycle_ms",
+    "provenance",
     "distributed",
 }
 

@@ -10,6 +10,8 @@ import pytest
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
+    exploration_times,
+    explored_areas,
     localization_errors,
     timing,
 )
@@ -86,3 +88,42 @@ def test_timing_gap() -> None:
     result = timing({"robot_0": 129.7, "robot_1": 133.75})
     assert result["total_s"] == 133.75
     assert result["gap_s"] == pytest.approx(4.05)
+
+
+def test_timing_of_a_robot_still_exploring_is_unknown() -> None:
+    result = timing({"robot_0": 40.0, "robot_1": None})
+    assert result["per_robot_s"] == {"robot_0": 40.0, "robot_1": None}
+    assert result["total_s"] is None and result["gap_s"] is None
+
+
+@pytest.mark.parametrize(
+    ("explored", "expected"),
+    [
+        # The team finished: idle robots at the moment they became idle, a robot that never
+        # did at the end, a lost robot when it was lost.
+        (True, [31.0, 50.0, 12.5]),
+        # Stopped (time limit, error): only the lost robot has a time; the others were
+        # still exploring, whether or not they were idle at that moment.
+        (False, [None, None, 12.5]),
+    ],
+)
+def test_exploration_times(explored: bool, expected: list[float | None]) -> None:
+    times = exploration_times(explored, (31.0, None, 20.0), {2: 12.5}, end_s=50.0)
+    assert times == expected
+
+
+def test_explored_areas_of_a_tiny_grid() -> None:
+    # 3 x 4 cells of 0.25 m^2; the map knows 7 cells, the true reachable free area is 5
+    # cells, of which the map knows 3 (the other 4 known cells are walls or out of reach).
+    known = np.array([[1, 1, 1, 1], [1, 1, 0, 0], [0, 1, 0, 0]], dtype=bool)
+    reachable = np.array([[0, 1, 1, 0], [0, 0, 1, 1], [0, 1, 0, 0]], dtype=bool)
+    areas = explored_areas(known, reachable, 0.25)
+    assert areas == {
+        "mapped_area_m2": 1.75,
+        "reachable_area_m2": 1.25,
+        "mapped_reachable_area_m2": 0.75,
+        "explored_fraction_of_reachable": 0.6,
+    }
+    assert math.isnan(
+        explored_areas(known, np.zeros_like(known), 0.25)["explored_fraction_of_reachable"]
+    )

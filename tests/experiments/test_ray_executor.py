@@ -12,13 +12,14 @@ from acslam.experiments.sweep import ProcessPoolRunner, sweep
 
 ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install 'acslam[ray]'")
 
-# Wall-clock figures differ from run to run whatever runs them; everything else must not.
-WALL_CLOCK_KEYS = {"wall_time_s", "real_time_factor", "server_cycle_ms"}
+# Wall-clock figures differ from run to run whatever runs them, and provenance records
+# when and in which process a run was made; everything else must not differ.
+UNREPEATABLE_KEYS = {"wall_time_s", "real_time_factor", "server_cycle_ms", "provenance"}
 
 
 def _metrics(folder: Path) -> dict:
     metrics = json.loads((folder / "metrics.json").read_text())
-    return {k: v for k, v in metrics.items() if k not in WALL_CLOCK_KEYS}
+    return {k: v for k, v in metrics.items() if k not in UNREPEATABLE_KEYS}
 
 
 def test_ray_and_process_pool_give_the_same_runs(tmp_path: Path) -> None:

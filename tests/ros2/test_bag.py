@@ -16,7 +16,7 @@ from acslam.cli import main
 from acslam.errors import DataError
 from acslam.messages import LidarScan
 from acslam.ros2 import convert
-from acslam.ros2.bag import BagReader, BagWriter
+from acslam.ros2.bag import BagReader, BagWriter, MemoryBag
 
 SAMPLES = "datasets/rosbag_samples"
 
@@ -88,6 +88,47 @@ def test_a_written_bag_reads_back_with_its_latched_topics(tmp_path: Path) -> Non
             for c in raw.connections
         }
     assert durability == {"/scan": None, "/tf_static": QosDurability.TRANSIENT_LOCAL}
+
+
+def test_a_bag_in_memory_reads_as_its_file(tmp_path: Path) -> None:
+    """The same writes into a file and into memory read back as the same messages in the
+    same order: by log time, equal times in the order written, whatever the topic."""
+    path = tmp_path / "same.mcap"
+    scans = [
+        LidarScan(0, stamp_s, np.linspace(-np.pi / 2, np.pi / 2, 5), np.full(5, 1.01 + k), 8.0)
+        for k, stamp_s in enumerate([2.0, 1.0, 1.0, 3.5])
+    ]
+    with BagWriter(path) as file_bag:
+        memory_bag = MemoryBag(path)
+        for bag in (file_bag, memory_bag):
+            bag.write("/tf_static", convert.tf_message([("b", "l", 3.0, [0.1, 0, 0])]), 3.0, True)
+            for k, scan in enumerate(scans):
+                bag.write("/scan", convert.laser_scan_msg(scan, scan.stamp, "l", 0.0), scan.stamp)
+                odometry = convert.odometry_msg(scan.stamp, [k, 0, 0], 0, 0, "o", "b")
+                bag.write("/odom", odometry, scan.stamp)
+    with BagReader(path) as file_bag:
+        assert (file_bag.topics, file_bag.counts) == (memory_bag.topics, memory_bag.counts)
+        from_file = list(file_bag.messages(["/scan", "/odom", "/tf_static"]))
+    from_memory = list(memory_bag.messages())
+    order = [(item.topic, item.log_time_ns) for item in from_memory]
+    assert order == [(item.topic, item.log_time_ns) for item in from_file]
+    assert [t for t, _ in order] == ["/scan", "/odom"] * 3 + ["/tf_static", "/scan", "/odom"]
+    assert [stamp for _, stamp in order] == [10**9] * 4 + [2 * 10**9] * 2 + [3 * 10**9] + [
+        3_500_000_000
+    ] * 2
+    for memory_item, file_item in zip(from_memory, from_file, strict=True):
+        memory, file = memory_item.message, file_item.message
+        if memory_item.topic == "/scan":
+            a, b = convert.laser_scan(memory, 0, 0.0), convert.laser_scan(file, 0, 0.0)
+            assert np.array_equal(a.angles, b.angles) and np.array_equal(a.ranges, b.ranges)
+            assert a.range_max_m == b.range_max_m
+        elif memory_item.topic == "/odom":
+            a_odom, b_odom = convert.odometry_pose(memory), convert.odometry_pose(file)
+            assert a_odom[0] == b_odom[0] and np.array_equal(a_odom[1], b_odom[1])
+        else:
+            (a_tf,), (b_tf,) = convert.tf_transforms(memory), convert.tf_transforms(file)
+            assert a_tf[:3] == b_tf[:3] and np.array_equal(a_tf[3], b_tf[3])
+    assert [item.topic for item in memory_bag.messages(["/odom"])] == ["/odom"] * 4
 
 
 def _damaged(tmp_path: Path) -> list[Path]:

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.errors import AcslamWarning, DataError
+from acslam.geometry import between
 
 NO_RETURN_RANGE_M = 50.0
 """SICK logs report "no return" as ~80 m; readings at or above this become ``inf``."""
@@ -89,6 +90,14 @@ class CarmenLog:
         merged: list[OdometryRecord | LaserRecord] = [*self.odometry, *self.scans]
         merged.sort(key=lambda record: (record.stamp_s, record.line))
         return merged
+
+
+def laser_offset(log: CarmenLog) -> np.ndarray:
+    """The laser pose in the robot frame: the median of ``odom^-1 * laser`` over the scans."""
+    offsets = np.array(
+        [between(s.odom_pose_xytheta, s.laser_pose_xytheta) for s in log.scans], dtype=float
+    )
+    return np.median(offsets, axis=0)
 
 
 def _floats(tokens: list[str]) -> np.ndarray:

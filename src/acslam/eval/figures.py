@@ -93,5 +93,4 @@ def plot_world(
     ax.set_ylabel("y [m]")
     ax.set_title(world.name)
     ax.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
     save_figure(fig, path)

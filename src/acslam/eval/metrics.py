@@ -152,13 +152,59 @@ def coverage_by_combination(
     return result
 
 
-def timing(finish_times_s: Mapping[str, float]) -> dict[str, object]:
-    """Exploration time per robot, of the team, and the gap between first and last (Table 5.1)."""
+def exploration_times(
+    explored: bool,
+    idle_since_s: Sequence[float | None],
+    lost_at_s: Mapping[int, float],
+    end_s: float,
+) -> list[float | None]:
+    """When each robot was done exploring: when it was lost; else, if the team finished,
+    when it last became idle (the end if it never did); else None, since it was still
+    exploring when the run stopped (at a time limit, on an error)."""
+    done_s = [
+        (end_s if idle_s is None else idle_s) if explored else None for idle_s in idle_since_s
+    ]
+    return [lost_at_s.get(i, done) for i, done in enumerate(done_s)]
+
+
+def timing(finish_times_s: Mapping[str, float | None]) -> dict[str, object]:
+    """Exploration time per robot, of the team, and the gap between first and last (Table 5.1).
+
+    A robot still exploring when the run stopped has no exploration time (None): the
+    time limit is when the run was cut off, not when the robot was done. The team's
+    total and gap are then unknown too.
+    """
     times = list(finish_times_s.values())
+    unfinished = any(t is None for t in times)
     return {
         "per_robot_s": dict(finish_times_s),
-        "total_s": max(times),
-        "gap_s": max(times) - min(times),
+        "total_s": None if unfinished else max(times),
+        "gap_s": None if unfinished else max(times) - min(times),
+    }
+
+
+def explored_areas(
+    known: np.ndarray, reachable: np.ndarray, cell_area_m2: float
+) -> dict[str, float]:
+    """The explored area of a run, measured three ways, which differ by design.
+
+    ``mapped_area_m2``: every cell the team map knows (free or occupied): walls count,
+    and so do free cells the LiDAR saw where no robot fits. ``reachable_area_m2``: the
+    true free area a robot can reach from the starts (what exploring must map).
+    ``mapped_reachable_area_m2``: the part of it the map knows, which over the reachable
+    area is ``explored_fraction_of_reachable`` (NaN without a reachable cell). Table 5.3's
+    team area is a fourth: the union of each robot's own map, which can differ from the
+    team map where only the robots' scans together made a cell certain.
+    """
+    mapped_reachable = int(np.count_nonzero(known & reachable))
+    reachable_cells = int(np.count_nonzero(reachable))
+    return {
+        "mapped_area_m2": int(np.count_nonzero(known)) * cell_area_m2,
+        "reachable_area_m2": reachable_cells * cell_area_m2,
+        "mapped_reachable_area_m2": mapped_reachable * cell_area_m2,
+        "explored_fraction_of_reachable": (
+            mapped_reachable / reachable_cells if reachable_cells else math.nan
+        ),
     }
 
 

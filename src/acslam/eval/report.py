@@ -23,9 +23,11 @@ from pydantic import BaseModel, ConfigDict, Field
 from acslam.config import validated
 from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
+from acslam.eval.metrics import explored_areas
 from acslam.eval.plotting import plt, save_figure
 from acslam.files import atomic_path, read_json, write_text
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from acslam.text import plural
 
 # Thesis Fig. 5.12: green TP, white TN, blue FP, red FN (grey: not mapped).
 CONFUSION_COLOURS = {
@@ -116,37 +118,102 @@ class RunRecord:
 
 # --------------------------------------------------------------------------- figures
 
+FIGURE_DPI = 100
+MAP_WIDTH_IN = 7.0
+"""Width of the axes of a full-size map; its height follows the mapped region."""
+ROBOT_MAP_WIDTH_IN = 4.2
+"""Width of the axes of one robot's map, two of which sit side by side in the report."""
+MAX_MAP_HEIGHT_IN = 7.0
+MAP_GREYS = {"free": 1.0, "occupied": 0.0, "unknown": 0.6}
 
-def _zoom(ax: plt.Axes, record: RunRecord, margin_m: float = 1.0) -> None:
-    """Frame the reachable area (the 40 m grids are mostly wall)."""
+
+@dataclass(frozen=True)
+class ReportFigure:
+    """A figure file and the caption the report prints under it."""
+
+    path: Path
+    caption: str
+    wide: bool = True
+    """Shown across the page (False: half its width, beside the next one)."""
+
+
+def _map_region(record: RunRecord, margin_m: float = 1.0) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) framing the reachable and mapped area (the 40 m grids are mostly
+    wall), with a margin that stays on the grid."""
     rows, cols = np.nonzero(record.reachable | (record.estimated_values != UNKNOWN))
-    if len(rows) == 0:
-        return
     spec = record.spec
-    ax.set_xlim(
-        spec.origin_x_m + cols.min() * spec.resolution_m - margin_m,
-        spec.origin_x_m + (cols.max() + 1) * spec.resolution_m + margin_m,
+    left, right, bottom, top = spec.extent_m
+    if len(rows) == 0:
+        return left, right, bottom, top
+    return (
+        max(left, spec.origin_x_m + cols.min() * spec.resolution_m - margin_m),
+        min(right, spec.origin_x_m + (cols.max() + 1) * spec.resolution_m + margin_m),
+        max(bottom, spec.origin_y_m + rows.min() * spec.resolution_m - margin_m),
+        min(top, spec.origin_y_m + (rows.max() + 1) * spec.resolution_m + margin_m),
     )
-    ax.set_ylim(
-        spec.origin_y_m + rows.min() * spec.resolution_m - margin_m,
-        spec.origin_y_m + (rows.max() + 1) * spec.resolution_m + margin_m,
-    )
+
+
+def _map_axes(record: RunRecord, width_in: float = MAP_WIDTH_IN) -> tuple[plt.Figure, plt.Axes]:
+    """A figure whose axes frame the run's region in metres at equal scale, sized to it."""
+    x0, x1, y0, y1 = _map_region(record)
+    height_in = width_in * (y1 - y0) / (x1 - x0)
+    if height_in > MAX_MAP_HEIGHT_IN:
+        width_in, height_in = width_in * MAX_MAP_HEIGHT_IN / height_in, MAX_MAP_HEIGHT_IN
+    fig, ax = plt.subplots(figsize=(width_in + 1.0, height_in + 0.8), dpi=FIGURE_DPI)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
+    return fig, ax
+
+
+def _key_beside(ax: plt.Axes, handles: list, **legend: object) -> None:
+    """The colour key right of the axes (cropping takes it in), never over the map."""
+    ax.legend(
+        handles=handles,
+        loc="upper left",
+        bbox_to_anchor=(1.02, 1.0),
+        borderaxespad=0.0,
+        fontsize=8,
+        frameon=False,
+        **legend,
+    )
+
+
+def _key_below(ax: plt.Axes, handles: list) -> None:
+    """The colour key in one row under the axes (for maps shown half a page wide)."""
+    ax.legend(
+        handles=handles,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.2),
+        ncol=len(handles),
+        fontsize=8,
+        frameon=False,
+        handlelength=1.2,
+        columnspacing=1.0,
+    )
+
+
+def _swatch(colour: object, label: str) -> plt.Rectangle:
+    """A legend entry for cells of one colour (edged, so white shows on white)."""
+    return plt.Rectangle((0, 0), 1, 1, facecolor=colour, edgecolor="0.3", lw=0.5, label=label)
+
+
+def _map_key(not_mapped: str) -> list:
+    return [
+        _swatch(str(MAP_GREYS["free"]), "free"),
+        _swatch(str(MAP_GREYS["occupied"]), "occupied"),
+        _swatch(str(MAP_GREYS["unknown"]), not_mapped),
+    ]
 
 
 def _map_image(values: np.ndarray) -> np.ndarray:
     """OccupancyGrid values as grey levels: white free, black occupied, grey unknown."""
-    image = np.full(values.shape, 0.6)
-    image[values == FREE] = 1.0
-    image[values == OCCUPIED] = 0.0
+    image = np.full(values.shape, MAP_GREYS["unknown"])
+    image[values == FREE] = MAP_GREYS["free"]
+    image[values == OCCUPIED] = MAP_GREYS["occupied"]
     return image
-
-
-def _save(fig: plt.Figure, path: Path) -> None:
-    fig.tight_layout()
-    save_figure(fig, path)
 
 
 def _show_grey(ax: plt.Axes, image: np.ndarray, record: RunRecord, alpha: float = 1.0) -> None:
@@ -164,40 +231,65 @@ def _show_grey(ax: plt.Axes, image: np.ndarray, record: RunRecord, alpha: float 
 
 
 def figure_trajectories(record: RunRecord, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+    """Each robot's estimate in its colour with its ground truth dashed on top (where the
+    two agree the dashes still show), start and end marked."""
+    fig, ax = _map_axes(record)
     _show_grey(ax, ~record.true_occupied, record, alpha=0.5)
     for i, (est, true) in enumerate(
         zip(record.estimated_trajectories, record.true_trajectories, strict=True)
     ):
-        ax.plot(
-            true[:, 1],
-            true[:, 2],
-            color="k",
-            lw=0.8,
-            ls="--",
-            label="ground truth" if i == 0 else None,
-        )
-        ax.plot(est[:, 1], est[:, 2], color=robot_colour(i), lw=1.5, label=f"robot_{i} estimated")
+        colour = robot_colour(i)
+        ax.plot(est[:, 1], est[:, 2], color=colour, lw=2.0, zorder=2)
+        if len(true):
+            ax.plot(true[:, 1], true[:, 2], color="k", lw=0.8, ls=(0, (3, 2)), zorder=3)
+        if len(est):
+            ax.plot(*est[0, 1:3], "o", ms=8, color=colour, mec="k", zorder=4)
+            ax.plot(*est[-1, 1:3], "s", ms=7, color=colour, mec="k", zorder=4)
     if len(record.landmarks_estimated):
-        ax.scatter(
-            *record.landmarks_estimated[:, :2].T,
-            s=8,
-            c="tab:blue",
-            marker="x",
-            label="landmarks (estimated)",
+        ax.scatter(*record.landmarks_estimated[:, :2].T, s=14, c="tab:blue", marker="x", zorder=5)
+    handles = [
+        plt.Line2D([], [], color=robot_colour(i), lw=2.0, label=f"robot_{i} estimated")
+        for i in range(len(record.estimated_trajectories))
+    ]
+    handles += [
+        plt.Line2D([], [], color="k", lw=0.8, ls=(0, (3, 2)), label="ground truth"),
+        plt.Line2D([], [], ls="", marker="o", ms=8, color="w", mec="k", label="start"),
+        plt.Line2D([], [], ls="", marker="s", ms=7, color="w", mec="k", label="end"),
+    ]
+    if len(record.landmarks_estimated):
+        handles.append(
+            plt.Line2D([], [], ls="", marker="x", color="tab:blue", label="landmark (estimated)")
         )
-    _zoom(ax, record)
-    ax.legend(fontsize=7, loc="upper right")
-    ax.set_title("Estimated vs ground-truth trajectories")
-    _save(fig, path)
+    handles.append(_swatch((0.5, 0.5, 0.5), "obstacle (true map)"))
+    _key_beside(ax, handles)
+    ax.set_title("Estimated and ground-truth trajectories")
+    save_figure(fig, path)
 
 
 def figure_map(values: np.ndarray, record: RunRecord, path: Path, title: str) -> None:
-    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+    fig, ax = _map_axes(record)
     _show_grey(ax, _map_image(values), record)
-    _zoom(ax, record)
+    _key_beside(ax, _map_key("not mapped"))
     ax.set_title(title)
-    _save(fig, path)
+    save_figure(fig, path)
+
+
+def figure_robot_map(values: np.ndarray, record: RunRecord, path: Path, name: str) -> None:
+    """One robot's own map, half a page wide, its key underneath."""
+    fig, ax = _map_axes(record, ROBOT_MAP_WIDTH_IN)
+    _show_grey(ax, _map_image(values), record)
+    _key_below(ax, _map_key(f"not mapped by {name}"))
+    ax.set_title(f"Area mapped by {name}")
+    save_figure(fig, path)
+
+
+CONFUSION_LABELS = {
+    "tp": "true positive: occupied, mapped occupied",
+    "tn": "true negative: free, mapped free",
+    "fp": "false positive: free, mapped occupied",
+    "fn": "false negative: occupied, mapped free",
+    "unknown": "not mapped (not scored)",
+}
 
 
 def confusion_image(true_occupied: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -214,40 +306,57 @@ def confusion_image(true_occupied: np.ndarray, values: np.ndarray) -> np.ndarray
 
 
 def figure_confusion(record: RunRecord, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 7), dpi=110)
+    fig, ax = _map_axes(record)
     ax.imshow(
         confusion_image(record.true_occupied, record.estimated_values),
         origin="lower",
         extent=record.spec.extent_m,
         interpolation="nearest",
     )
-    _zoom(ax, record)
-    ax.set_title("Confusion map: green TP, white TN, blue FP, red FN")
-    _save(fig, path)
+    _key_beside(ax, [_swatch(CONFUSION_COLOURS[k], v) for k, v in CONFUSION_LABELS.items()])
+    ax.set_title("Confusion map (positive: occupied)")
+    save_figure(fig, path)
 
 
 def figure_explored(record: RunRecord, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(7, 3.5), dpi=110)
+    """The team map's mapped area over the run against the reachable free area."""
+    fig, ax = plt.subplots(figsize=(9.0, 3.6), dpi=FIGURE_DPI)
     history = record.explored_history
     if len(history):
-        ax.plot(history[:, 0], history[:, 1], color="tab:green")
-    reachable_m2 = record.reachable.sum() * record.spec.resolution_m**2
-    ax.axhline(reachable_m2, color="k", ls=":", label=f"reachable free area {reachable_m2:.1f} m²")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("mapped area [m²]")
-    ax.legend(fontsize=8)
-    ax.set_title("Explored area over time")
-    _save(fig, path)
+        ax.plot(
+            history[:, 0], history[:, 1], color="tab:green", lw=1.8,
+            label="mapped area of the team map (free or occupied cells)",
+        )  # fmt: skip
+    reachable_m2 = explored_areas(
+        record.estimated_values != UNKNOWN, record.reachable, record.spec.resolution_m**2
+    )["reachable_area_m2"]
+    ax.axhline(
+        reachable_m2,
+        color="k",
+        ls=":",
+        label=f"reachable free area (true map), {reachable_m2:.1f} m²",
+    )
+    ax.set_xlabel("simulated time [s]")
+    ax.set_ylabel("area [m²]")
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title("Mapped area over time")
+    save_figure(fig, path)
 
 
 TIMING_WINDOW_S = 10.0
 """Simulated seconds per point of the cycle-time figure (its p95 over the window)."""
 
 
+def stage_label(name: str) -> str:
+    """A stage's name as people write it ("local planning", "whole cycle")."""
+    return "whole cycle" if name == "cycle" else name.replace("_", " ")
+
+
 def figure_cycle_time(record: RunRecord, path: Path) -> None:
     """p95 of the whole cycle and of each stage per 10 s of simulated time, against the
     control period: whether the cost of a cycle grows as the run goes on."""
-    fig, ax = plt.subplots(figsize=(7, 3.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(9.0, 3.6), dpi=FIGURE_DPI)
     for name, samples in zip(record.stage_names, record.stage_timings, strict=True):
         if len(samples) == 0:
             continue
@@ -255,145 +364,317 @@ def figure_cycle_time(record: RunRecord, path: Path) -> None:
         starts = np.unique(windows)
         p95_ms = [1000 * np.percentile(samples[windows == w, 1], 95) for w in starts]
         style = {"color": "k", "lw": 2} if name == "cycle" else {"lw": 1}
-        ax.plot((starts + 0.5) * TIMING_WINDOW_S, p95_ms, label=str(name), **style)
+        ax.plot((starts + 0.5) * TIMING_WINDOW_S, p95_ms, label=stage_label(str(name)), **style)
     period_ms = 1000 * float(record.control_period_s)
     ax.axhline(period_ms, color="tab:red", ls=":", label=f"control period {period_ms:.0f} ms")
     ax.set_xlabel("simulated time [s]")
     ax.set_ylabel(f"p95 per {TIMING_WINDOW_S:.0f} s [ms]")
     ax.set_yscale("log")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.set_title("Server cycle and stages over the run")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
-def write_figures(out_dir: Path, record: RunRecord) -> list[Path]:
+def write_figures(out_dir: Path, record: RunRecord) -> list[ReportFigure]:
+    """Every figure of the run under ``out_dir/figures``, with its caption."""
     folder = Path(out_dir) / "figures"
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = [
-        folder / "trajectories.png",
-        folder / "map.png",
-        folder / "confusion.png",
-        folder / "explored_area.png",
+    count = len(record.estimated_trajectories)
+    figures = [
+        ReportFigure(
+            folder / "trajectories.png",
+            (
+                "The robot's estimated trajectory (solid) and its ground truth"
+                if count == 1
+                else f"Estimated trajectories of the {count} robots (solid, one colour each) "
+                "and their ground truth"
+            )
+            + " (black, dashed, drawn on top), from start (circle) to end (square), over the "
+            "true map; crosses are the estimated landmarks.",
+        ),
+        ReportFigure(
+            folder / "map.png",
+            "The team's final occupancy map, made from every robot's scans.",
+        ),
+        ReportFigure(
+            folder / "confusion.png",
+            "The final map scored cell by cell against the true map, occupied being positive, "
+            "in the colours of thesis Fig. 5.12: green and white cells are right, blue and "
+            "red wrong; grey cells were not mapped and are left out of the mapping accuracy.",
+        ),
+        ReportFigure(
+            folder / "explored_area.png",
+            "Area the team map knows (free or occupied) each simulated second, against the "
+            "free area a robot can reach. Walls and cells seen beyond reach count as mapped, "
+            "so the curve can end above the line: see the explored-area table.",
+        ),
     ]
-    figure_trajectories(record, paths[0])
-    figure_map(record.estimated_values, record, paths[1], "Final map (all robots)")
-    figure_confusion(record, paths[2])
-    figure_explored(record, paths[3])
+    figure_trajectories(record, figures[0].path)
+    figure_map(record.estimated_values, record, figures[1].path, "Final map")
+    figure_confusion(record, figures[2].path)
+    figure_explored(record, figures[3].path)
     if record.stage_timings:
-        paths.append(folder / "cycle_time.png")
-        figure_cycle_time(record, paths[-1])
+        figures.append(
+            ReportFigure(
+                folder / "cycle_time.png",
+                f"95th percentile of the server's cycle time and of each stage per "
+                f"{TIMING_WINDOW_S:.0f} s of simulated time (log scale), against the control "
+                "period: whether a cycle gets dearer as the run goes on.",
+            )
+        )
+        figure_cycle_time(record, figures[-1].path)
     for i, known in enumerate(record.robot_known):
-        values = np.where(known, record.estimated_values, -1)
-        path = folder / f"exploration_robot_{i}.png"
-        figure_map(values, record, path, f"Area mapped by robot_{i}")
-        paths.append(path)
-    return paths
+        name = f"robot_{i}"
+        figures.append(
+            ReportFigure(
+                folder / f"exploration_robot_{i}.png",
+                f"Cells {name}'s own scans mapped (its row of the coverage table).",
+                wide=False,
+            )
+        )
+        figure_robot_map(
+            np.where(known, record.estimated_values, -1), record, figures[-1].path, name
+        )
+    return figures
 
 
 # --------------------------------------------------------------------------- html
 
+DASH = "—"
+"""What a table shows for a value the run has no number for (null in metrics.json)."""
 
-def _number(value: object, digits: int = 3) -> str:
-    """A table cell; a figure that has none (None, NaN) is a dash, which
-    :func:`missing_values` explains."""
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
+
+def _cell(value: object, digits: int) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return DASH
     if isinstance(value, float):
         return f"{value:.{digits}f}"
     return html.escape(str(value))
 
 
-def _percent(fraction: float | None) -> float | None:
-    return None if fraction is None else 100 * fraction
+def _table(header: list[str], rows: list[list[object]], digits: int | list[int] = 3) -> str:
+    """An HTML table; ``digits`` per column (or for all) sets the decimals of floats. Columns
+    of words are set left, columns of numbers right."""
+    places = digits if isinstance(digits, list) else [digits] * len(header)
+    words = [all(isinstance(row[k], str) for row in rows) for k in range(len(header))]
 
+    def cell(tag: str, k: int, text: str) -> str:
+        return f'<{tag} class="words">{text}</{tag}>' if words[k] else f"<{tag}>{text}</{tag}>"
 
-def _table(header: list[str], rows: list[list[object]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    head = "".join(cell("th", k, html.escape(h)) for k, h in enumerate(header))
     body = "".join(
-        "<tr>" + "".join(f"<td>{_number(c)}</td>" for c in row) + "</tr>" for row in rows
+        "<tr>" + "".join(cell("td", k, _cell(c, places[k])) for k, c in enumerate(row)) + "</tr>"
+        for row in rows
     )
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _note(text: str) -> str:
+    return f'<p class="note">{html.escape(text)}</p>'
+
+
+def _timing_table(metrics: dict) -> str:
+    timing = metrics["timing"]
+    per_robot = timing["per_robot_s"]
+    table = _table(
+        ["robot", "exploration time [s]"],
+        [[name, t] for name, t in per_robot.items()]
+        + [["total", timing["total_s"]], ["gap between first and last", timing["gap_s"]]],
+        1,
+    )
+    if any(t is None for t in per_robot.values()):
+        table += _note(
+            f"{DASH}: still exploring when the run stopped ({metrics['reason']}) after "
+            f"{metrics['sim_time_s']:.1f} s, so no exploration time; total and gap need every "
+            "robot's."
+        )
+    return table
+
+
+def _localization_table(metrics: dict) -> str:
+    keys = ("final_dist_m", "mae_m", "rmse_m", "std_m")
+    yaw_keys = ("final_yaw_rad", "mae_yaw_rad", "rmse_yaw_rad", "std_yaw_rad")
+    table = _table(
+        ["robot", "final error [m]", "MAE [m]", "RMSE [m]", "STD [m]",
+         "final yaw error [rad]", "yaw MAE [rad]", "yaw RMSE [rad]", "yaw STD [rad]"],
+        [[name, *(m[k] for k in keys + yaw_keys)] for name, m in metrics["localization"].items()],
+    )  # fmt: skip
+    unscored = [
+        name for name in metrics["timing"]["per_robot_s"] if name not in metrics["localization"]
+    ]
+    if unscored:
+        table += _note(
+            "Not scored (no ground truth, or no estimate within its time yet: a run that "
+            f"ended before the robot's first keyframe): {', '.join(unscored)}."
+        )
+    return table
+
+
+def _combination_rows(coverage: dict) -> list[tuple[str, dict]]:
+    """Table 5.3's rows: every combination of robots (the other coverage keys are areas)."""
+    return [(name, c) for name, c in coverage.items() if isinstance(c, dict)]
+
+
+def _coverage_table(metrics: dict) -> str:
+    return _table(
+        ["robots", "mapped area [m²]", "share of the team's area [%]"],
+        [
+            [name.replace("+", ", "), c["area_m2"], 100 * c["rate"]]
+            for name, c in _combination_rows(metrics["coverage"])
+        ],
+        [0, 2, 1],
+    ) + _note(
+        "Each robot's mapped area is what its own scans made known (free or occupied); a "
+        "combination's is the union of its robots' areas, its share that over the whole team's."
+    )
+
+
+def _explored_table(metrics: dict, record: RunRecord) -> str:
+    """The explored area measured the ways the report shows it, side by side."""
+    areas = explored_areas(
+        record.estimated_values != UNKNOWN, record.reachable, record.spec.resolution_m**2
+    )
+    reachable_m2 = areas["reachable_area_m2"]
+
+    def share(area_m2: float) -> float | None:
+        return 100 * area_m2 / reachable_m2 if reachable_m2 else None
+
+    rows = [
+        ["reachable free area (true map)", reachable_m2, share(reachable_m2)],
+        ["reachable free area mapped", areas["mapped_reachable_area_m2"],
+         share(areas["mapped_reachable_area_m2"])],
+        ["team map: all mapped cells (end of the area figure)", areas["mapped_area_m2"],
+         share(areas["mapped_area_m2"])],
+    ]  # fmt: skip
+    combinations = _combination_rows(metrics["coverage"])
+    if combinations:
+        team = max(combinations, key=lambda item: item[0].count("+"))[1]["area_m2"]
+        rows.append(["union of the robots' own maps (team row above)", team, share(team)])
+    header = ["measure", "area [m²]", "share of the reachable free area [%]"]
+    table = _table(header, rows, [0, 2, 2])
+    if not reachable_m2:
+        table += _note(f"{DASH}: no free area is reachable from the first start.")
+    return table + _note(
+        "The reachable free area is the true free space a robot can reach from the starts: "
+        "what exploring must map; the run explored the share of it that is mapped. The "
+        "mapped areas also count walls and free cells the LiDAR saw where no robot fits, so "
+        "they can exceed it. The team map fuses every robot's scans, so a cell can be "
+        "certain in it while no single robot's map is, or the other way round where robots "
+        "disagree."
+    )  # fmt: skip
+
+
+MAPPING_NAMES = {
+    "accuracy": "accuracy",
+    "tpr": "true positive rate (TPR)",
+    "tnr": "true negative rate (TNR)",
+    "fpr": "false positive rate (FPR)",
+    "fnr": "false negative rate (FNR)",
+}
+
+
+def _mapping_table(metrics: dict) -> str:
+    mapping = metrics["mapping"]
+    table = _table(
+        ["measure", "value [%]"],
+        [
+            [label, None if mapping[k] is None else 100 * mapping[k]]
+            for k, label in MAPPING_NAMES.items()
+        ],
+        [0, 1],
+    )
+    scored = sum(mapping[k] for k in ("tp", "tn", "fp", "fn"))
+    note = f"Over the {plural(scored, 'mapped cell')}; occupied is positive."
+    if any(mapping[k] is None or not math.isfinite(mapping[k]) for k in MAPPING_NAMES):
+        note += f" {DASH}: no cell of that rate's kind was mapped."
+    return table + _note(note)
+
+
+SAFETY_NAMES = {
+    "obstacle_collisions": "collisions with walls [count]",
+    "robot_collisions": "collisions between robots [count]",
+    "min_robot_distance_m": "closest distance between two robots [m]",
+    "stuck_events": "stuck events (recovery started) [count]",
+}
+
+
+def _safety_table(metrics: dict) -> str:
+    safety = metrics["safety"]
+    table = _table(list(SAFETY_NAMES.values()), [[safety.get(key) for key in SAFETY_NAMES]], 2)
+    notes = []
+    if safety.get("min_robot_distance_m") is None or not math.isfinite(
+        safety["min_robot_distance_m"]
+    ):
+        notes.append(
+            f"{DASH} distance: one robot has no other to come close to."
+            if metrics["robots"] == 1
+            else f"{DASH} distance: no ground truth of the robots' positions to measure it on."
+        )
+    if safety.get("obstacle_collisions") is None:
+        notes.append(f"{DASH} collisions: no ground truth to count them against.")
+    return table + "".join(_note(n) for n in notes)
+
+
+CYCLE_STATISTICS = ("mean", "p95", "p99", "max")
 
 
 def _cycle_table(cycle_ms: dict) -> str:
     """Whole cycle and stages: mean, p95, p99, max, and p95 as a share of the control
     period (runs written before p99 and max were recorded show a dash there)."""
-    period_ms = cycle_ms.get("control_period_ms", math.nan)
-    rows = [("whole cycle", cycle_ms)] + [
-        (k, v) for k, v in cycle_ms.items() if isinstance(v, dict)
-    ]
+    period_ms = cycle_ms.get("control_period_ms")
+    rows = [("cycle", cycle_ms)] + [(k, v) for k, v in cycle_ms.items() if isinstance(v, dict)]
     return _table(
-        ["stage", "mean", "p95", "p99", "max", "p95 / control period"],
+        ["stage", *(f"{k} [ms]" for k in CYCLE_STATISTICS),
+         f"p95 share of the control period{f' ({period_ms:g} ms)' if period_ms else ''} [%]"],
         [
-            [name, *(float(v.get(k, math.nan)) for k in ("mean", "p95", "p99", "max")),
-             float(v["p95"]) / period_ms]
+            [stage_label(name), *(v.get(k) for k in CYCLE_STATISTICS),
+             100 * v["p95"] / period_ms if period_ms else None]
             for name, v in rows
         ],
+        [0, 1, 1, 1, 1, 0],
     )  # fmt: skip
 
 
-def report_tables(metrics: dict) -> dict[str, str]:
-    """The run's tables in the layout of thesis Tables 5.1-5.4, as HTML."""
-    timing = metrics["timing"]
-    tables = {
-        "Timing (Table 5.1)": _table(
-            ["robot", "exploration time [s]"],
-            [[name, t] for name, t in timing["per_robot_s"].items()]
-            + [["total", timing["total_s"]], ["gap", timing["gap_s"]]],
-        ),
-        "Localization (Table 5.2)": _table(
-            [
-                "robot",
-                "final dist. [m]",
-                "MAE [m]",
-                "RMSE [m]",
-                "STD [m]",
-                "final yaw [rad]",
-                "MAE [rad]",
-                "RMSE [rad]",
-                "STD [rad]",
-            ],
-            [
-                [
-                    name,
-                    m["final_dist_m"],
-                    m["mae_m"],
-                    m["rmse_m"],
-                    m["std_m"],
-                    m["final_yaw_rad"],
-                    m["mae_yaw_rad"],
-                    m["rmse_yaw_rad"],
-                    m["std_yaw_rad"],
-                ]
-                for name, m in metrics["localization"].items()
-            ],
-        ),
-        "Coverage per robot combination (Table 5.3)": _table(
-            ["robots", "area [m²]", "rate [%]"],
-            [
-                [name.replace("+", ", "), c["area_m2"], _percent(c["rate"])]
-                for name, c in metrics["coverage"].items()
-                if isinstance(c, dict)
-            ]
-            + [
-                [
-                    "explored fraction of the reachable free area [%]",
-                    "",
-                    _percent(metrics["coverage"]["explored_fraction_of_reachable"]),
-                ]
-            ],
-        ),
-        "Mapping accuracy (Table 5.4)": _table(
-            ["metric", "value [%]"],
-            [
-                [k.upper(), _percent(metrics["mapping"][k])]
-                for k in ("accuracy", "tpr", "tnr", "fpr", "fnr")
-            ],
-        ),
-        "Safety": _table(["metric", "value"], [[k, v] for k, v in metrics["safety"].items()]),
-        "Server cycle [ms]": _cycle_table(metrics["server_cycle_ms"]),
+def report_tables(metrics: dict, record: RunRecord) -> dict[str, str]:
+    """The run's tables in the layout of thesis Tables 5.1-5.4, as HTML, each with the
+    notes that explain its dashes."""
+    return {
+        "Timing (Table 5.1)": _timing_table(metrics),
+        "Localization (Table 5.2)": _localization_table(metrics),
+        "Coverage per robot combination (Table 5.3)": _coverage_table(metrics),
+        "Explored area": _explored_table(metrics, record),
+        "Mapping accuracy (Table 5.4)": _mapping_table(metrics),
+        "Safety": _safety_table(metrics),
+        "Server cycle time": _cycle_table(metrics["server_cycle_ms"]),
     }
-    return tables
+
+
+def provenance_line(metrics: dict) -> str:
+    """Which acslam, from which commit, with which command and when made the run."""
+    made = metrics.get("provenance")
+    if not made:
+        return "Provenance: not recorded (a run folder written before acslam recorded it)."
+    return (
+        f"Made by acslam {made['acslam_version']}, commit {made['commit']}, on "
+        f"{made['date_utc']} with: {made['command']}"
+    )
+
+
+STYLE = """
+body { font-family: sans-serif; margin: 2em auto; max-width: 1200px; padding: 0 1em;
+       color: #222; line-height: 1.35; }
+h1 { margin-bottom: 0.2em; }
+.provenance { color: #555; font-size: 0.9em; margin-top: 0; overflow-wrap: anywhere; }
+table { border-collapse: collapse; margin: 0.5em 0 0.3em 0; }
+td, th { border: 1px solid #bbb; padding: 3px 8px; text-align: right; }
+.words { text-align: left; }
+th { background: #eee; }
+.note { color: #444; font-size: 0.9em; margin: 0.2em 0 1em 0; max-width: 900px; }
+.figures { display: flex; flex-wrap: wrap; gap: 1em 2%; align-items: flex-start; }
+figure { margin: 0; flex: 0 0 100%; }
+figure.half { flex: 0 0 49%; }
+figure img { max-width: 100%; display: block; }
+figcaption { font-size: 0.9em; margin: 0.3em 0 0.8em 0; max-width: 900px; }
+"""
 
 
 def write_report(out_dir: Path, record: RunRecord, metrics: dict) -> Path:
@@ -402,64 +683,33 @@ def write_report(out_dir: Path, record: RunRecord, metrics: dict) -> Path:
     figures = write_figures(out_dir, record)
     status = "completed" if metrics["completed"] else f"not completed ({metrics['reason']})"
     summary = (
-        f"{metrics['scenario']}: {metrics['robots']} robots, planner {metrics['planner']}, "
-        f"allocator {metrics['allocator']}, seed {metrics['seed']}: {status} after "
-        f"{metrics['sim_time_s']:.1f} s simulated in {metrics['wall_time_s']:.1f} s wall time "
-        f"({metrics['real_time_factor']:.1f}x real time)."
+        f"{metrics['scenario']}: {plural(metrics['robots'], 'robot')}, planner "
+        f"{metrics['planner']}, allocator {metrics['allocator']}, seed {metrics['seed']}: "
+        f"{status} after {metrics['sim_time_s']:.1f} s simulated in "
+        f"{metrics['wall_time_s']:.1f} s wall time ({metrics['real_time_factor']:.1f}x real "
+        "time)."
     )
     sections = "".join(
-        f"<h2>{html.escape(title)}</h2>{table}" for title, table in report_tables(metrics).items()
+        f"<h2>{html.escape(title)}</h2>{table}"
+        for title, table in report_tables(metrics, record).items()
     )
-    missing = missing_values(metrics)
-    if missing:
-        items = "".join(f"<li>{html.escape(why)}</li>" for why in missing)
-        sections += f"<p>A dash (—) marks a figure that has no value:</p><ul>{items}</ul>"
     images = "".join(
-        f'<figure><img alt="{p.stem}" src="data:image/png;base64,'
-        f'{base64.b64encode(p.read_bytes()).decode()}"><figcaption>{p.stem}</figcaption></figure>'
-        for p in figures
+        f'<figure class="{"wide" if f.wide else "half"}"><img alt="{html.escape(f.caption)}" '
+        f'src="data:image/png;base64,{base64.b64encode(f.path.read_bytes()).decode()}">'
+        f"<figcaption><b>Figure {n}.</b> {html.escape(f.caption)}</figcaption></figure>"
+        for n, f in enumerate(figures, start=1)
     )
     title = html.escape(f"acslam run: {metrics['scenario']}")
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
-<style>
-body {{ font-family: sans-serif; margin: 2em; max-width: 1100px; }}
-table {{ border-collapse: collapse; margin-bottom: 1em; }}
-td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; }}
-th {{ background: #eee; }}
-figure {{ display: inline-block; margin: 0.5em; }}
-img {{ max-width: 520px; }}
-</style></head><body>
-<h1>acslam run report</h1><p>{html.escape(summary)}</p>
-{sections}<h2>Figures</h2>{images}
+<style>{STYLE}</style></head><body>
+<h1>acslam run report</h1>
+<p class="provenance">{html.escape(provenance_line(metrics))}</p>
+<p>{html.escape(summary)}</p>
+{sections}<h2>Figures</h2><div class="figures">{images}</div>
 </body></html>
 """
     return write_text(out_dir / "report.html", page)
-
-
-def missing_values(metrics: dict) -> list[str]:
-    """Why each figure the report shows as a dash has no value."""
-    why = []
-    if metrics["safety"].get("min_robot_distance_m", 0.0) is None:
-        why.append(
-            "minimum robot distance: a single robot has no other to keep a distance from"
-            if metrics["robots"] == 1
-            else "minimum robot distance: the robots' true positions are not known"
-        )
-    if metrics["safety"].get("obstacle_collisions", 0) is None:
-        why.append("collisions: not measured (real robots report no contacts)")
-    for name in metrics["timing"]["per_robot_s"]:
-        if name not in metrics["localization"]:
-            why.append(
-                f"localization of {name}: no ground truth, or no estimate within it (a run "
-                "that ended before the robot's first keyframe)"
-            )
-    for key in ("accuracy", "tpr", "tnr", "fpr", "fnr"):
-        if metrics["mapping"][key] is None:
-            why.append(f"{key.upper()}: no mapped cell falls in the cells this rate counts")
-    if metrics["coverage"]["explored_fraction_of_reachable"] is None:
-        why.append("explored fraction: no free area is reachable from the first start")
-    return why
 
 
 # --------------------------------------------------------------------------- reading back

@@ -38,7 +38,6 @@ def plot_slam_run(
     ax.set_ylabel("y [m]")
     ax.set_title(title)
     ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
     save_figure(fig, path, dpi=120)
 
 
@@ -63,7 +62,7 @@ def plot_map(
     """One occupancy map with each robot's trajectory ((N, 3)) over it."""
     fig, ax = plt.subplots(figsize=(9, 9))
     _draw_map(ax, values, spec, tracks, title)
-    save_figure(fig, path, dpi=200, bbox_inches="tight")
+    save_figure(fig, path, dpi=200)
 
 
 def plot_map_panels(
@@ -74,4 +73,4 @@ def plot_map_panels(
     fig, axes = plt.subplots(1, len(panels), figsize=(8 * len(panels), 8))
     for ax, panel in zip(axes, panels, strict=True):
         _draw_map(ax, *panel)
-    save_figure(fig, path, dpi=150, bbox_inches="tight")
+    save_figure(fig, path, dpi=150)

@@ -36,6 +36,7 @@ from acslam.config import builtin_scenario_names
 from acslam.errors import ConfigError, PluginError
 from acslam.files import read_yaml
 from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS, Registry
+from acslam.text import plural
 
 DEFAULT_PLANNER = LOCAL_PLANNERS.default
 DEFAULT_ALLOCATOR = ALLOCATORS.default
@@ -148,7 +149,8 @@ def parse_grid(data: Any, source: str) -> ExperimentGrid:
         grid = ExperimentGrid.model_validate(data)
     except ValidationError as exc:
         first = exc.errors()[0]
-        more = f" (and {exc.error_count() - 1} more problems)" if exc.error_count() > 1 else ""
+        extra = exc.error_count() - 1
+        more = f" (and {plural(extra, 'more problem')})" if extra else ""
         message = first["msg"].removeprefix("Value error, ")
         raise ConfigError(source, _field(first["loc"]), message + more) from None
     names = set(builtin_scenario_names())

@@ -25,6 +25,7 @@ from acslam.experiments import thesis_data
 from acslam.experiments.grid import DEFAULT_ALLOCATOR, DEFAULT_PLANNER
 from acslam.experiments.sweep import FAILURE_FILE, SPEC_FILE, SWEEP_FILE
 from acslam.files import read_json, write_text
+from acslam.text import plural
 
 Cell = tuple[str, int, str, str]  # scenario, robots, planner, allocator
 THESIS_NAME = {v: k for k, v in thesis_data.THESIS_ROBOT.items()}
@@ -579,7 +580,7 @@ def _overview(runs: list[RunOutcome]) -> str:
         counts[r.status] += 1
     seeds = sorted({r.spec["seed"] for r in runs})
     return (
-        f"{len(runs)} runs ({', '.join(f'{n} {s}' for s, n in counts.items())}); seeds "
+        f"{plural(len(runs), 'run')} ({', '.join(f'{n} {s}' for s, n in counts.items())}); seeds "
         f"{', '.join(map(str, seeds))}. Cells: mean ± sample std over seeds (one value: no std). "
         "Exploration times and speed-ups: completed runs only; other figures: every run "
         "that wrote metrics. Thesis figures: real TurtleBot3 runs, one trial each (§5.5)."

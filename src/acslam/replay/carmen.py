@@ -1,13 +1,15 @@
 """Run SLAM and mapping on a CARMEN laser log (ODOM + FLASER), e.g. Intel Lab or fr079.
 
-The log becomes robot 0's messages and plays through the localizer stage of ``acslam
-run`` (:func:`acslam.replay.localize`) with the ``carmen`` preset of algorithms
-(``presets/carmen.yaml``). The state is the *laser* pose: the FLASER line's ``x y theta``.
-Odometry poses (ODOM lines and the odometry pose of each FLASER line) are moved to the
-laser frame by the fixed robot-to-laser offset read off the FLASER lines, and consecutive
-poses become :class:`OdometryIncrement` messages, as the simulator's robots send them; the
-absolute odometry frame is never used beyond the start pose, the laser pose of the first
-record (where the increments begin).
+The log plays as the ROS 2 bag ``acslam convert carmen`` writes of it
+(:func:`acslam.ros2.carmen_bag.write_carmen`), held in memory, through the replay of
+``acslam slam rosbag`` (:func:`acslam.replay.rosbag.replay_bag`) with the ``carmen`` preset
+of algorithms (``presets/carmen.yaml``). There is one way from a log to the localizer,
+so the two commands give the same trajectory: ranges and beam angles at float32 (the
+LaserScan's precision, far below the log's 1 cm resolution), headings through a
+quaternion, stamps in ROS time's nanoseconds, the laser mount through ``tf_static``, and
+each FLASER line's scan at its own laser pose, where the odometry increments up to it
+have brought the robot's laser frame. The state is the *laser* pose; the start pose the
+laser pose of the first record (where the increments begin).
 
 Outputs: ``trajectory.tum`` holds one laser pose per FLASER line the localizer kept, in
 file order, stamped with the line's ipc timestamp: its keyframe's optimised pose composed
@@ -23,82 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from acslam.config import AlgorithmsConfig
-from acslam.datasets.carmen import (
-    NO_RETURN_RANGE_M,
-    CarmenLog,
-    LaserRecord,
-    OdometryRecord,
-    read_carmen,
-)
-from acslam.errors import DataError
+from acslam.datasets.carmen import LaserRecord, read_carmen
 from acslam.files import write_json
-from acslam.geometry import between, compose
-from acslam.messages import LidarScan, OdometryIncrement, RobotMessage
-from acslam.pipeline.stages import Localizer
-from acslam.replay import localize, preset
-from acslam.replay.outputs import PosedScans, ReplayMap, replay_metrics, write_maps
+from acslam.replay import preset
+from acslam.replay.outputs import PosedScans, replay_metrics, write_maps
+from acslam.replay.rosbag import replay_bag
+from acslam.ros2.bag import MemoryBag
+from acslam.ros2.carmen_bag import write_carmen
 from acslam.trajectory import write_tum
-
-
-def laser_offset(log: CarmenLog) -> np.ndarray:
-    """The laser pose in the robot frame: the median of ``odom^-1 * laser`` over the scans."""
-    offsets = np.array(
-        [between(s.odom_pose_xytheta, s.laser_pose_xytheta) for s in log.scans], dtype=float
-    )
-    return np.median(offsets, axis=0)
-
-
-def laser_pose(record: OdometryRecord | LaserRecord, offset: np.ndarray) -> np.ndarray:
-    """The laser pose a record gives: a FLASER line's own, an ODOM pose moved by ``offset``."""
-    if isinstance(record, LaserRecord):
-        return record.laser_pose_xytheta
-    return compose(record.pose_xytheta, offset)
-
-
-def carmen_messages(log: CarmenLog, offset: np.ndarray) -> list[RobotMessage]:
-    """The log as robot 0's messages, in logger-time order: the laser pose's odometry
-    increment up to every record, and each FLASER scan."""
-    messages: list[RobotMessage] = []
-    previous: np.ndarray | None = None
-    previous_stamp = 0.0
-    for record in log.records:
-        pose = laser_pose(record, offset)
-        if previous is not None:
-            increment = between(previous, pose)
-            messages.append(OdometryIncrement(0, record.stamp_s, previous_stamp, *increment))
-        previous, previous_stamp = pose, record.stamp_s
-        if isinstance(record, LaserRecord):
-            messages.append(
-                LidarScan(0, record.stamp_s, record.angles_rad, record.ranges_m, NO_RETURN_RANGE_M)
-            )
-    return messages
-
-
-def _metrics(
-    path: str | Path,
-    log: CarmenLog,
-    offset: np.ndarray,
-    scans_used: int,
-    localizer: Localizer,
-    replay_map: ReplayMap,
-    timings_s: dict[str, float],
-) -> dict:
-    stamps = np.array([record.stamp_s for record in log.records])
-    _, keyframe_poses = localizer.trajectory(0)
-    return {
-        "log": str(path),
-        "scans": len(log.scans),
-        "scans_used": scans_used,
-        "odometry_records": len(log.odometry),
-        "keyframes": len(keyframe_poses),
-        "laser_offset_xytheta": offset.tolist(),
-        "trajectory_frame": "laser (FLASER x y theta), one pose per FLASER line in file order",
-        "skipped_lines": {
-            "count": len(log.skipped_lines),
-            "lines": [number for number, _ in log.skipped_lines],
-        },
-        **replay_metrics(localizer, replay_map, float(stamps[-1] - stamps[0]), timings_s),
-    }
 
 
 def run_carmen(
@@ -115,24 +49,20 @@ def run_carmen(
     out_dir = Path(out_dir)
     wall_start = time.perf_counter()
     log = read_carmen(path)
-    if not log.scans:
-        raise DataError(path, "no usable FLASER line")
-    offset = laser_offset(log)
-    messages = carmen_messages(log, offset)
-    first = log.records[0]
-    slam_start = time.perf_counter()
-    result = localize(messages, algorithms, {0: laser_pose(first, offset)}, start_s=first.stamp_s)
-    slam_s = time.perf_counter() - slam_start
-    localizer = result.localizer
+    bag = MemoryBag(path)
+    write_carmen(log, bag)
+    replay = replay_bag(bag, algorithms=algorithms)
+    localizer = replay.replayed.localizer
+    (stream,) = replay.streams
 
-    kept = {id(scan.received): scan for scan in result.scans}
-    records = [r for r in log.records if isinstance(r, LaserRecord)]
-    scans = [m for m in messages if isinstance(m, LidarScan)]
+    # The bag's scans are the FLASER records in time order, each paired as it is (the
+    # odometry has a sample at every scan's stamp).
+    records = [record for record in log.records if isinstance(record, LaserRecord)]
+    record_of = {id(scan): record for scan, record in zip(stream.robot.scans, records, strict=True)}
     used = sorted(
-        ((record, kept[id(scan)]) for record, scan in zip(records, scans, strict=True)
-         if id(scan) in kept),
+        ((record_of[id(scan.received)], scan) for scan in replay.replayed.scans),
         key=lambda pair: pair[0].line,
-    )  # fmt: skip
+    )
     poses = [localizer.scan_pose(scan.index) for _, scan in used]
     track = np.array(poses)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -146,7 +76,24 @@ def run_carmen(
         )
     slam = PosedScans([scan.mappable for _, scan in used], poses, [track])
     replay_map = write_maps(out_dir, Path(path).name, slam, odometry, algorithms)
-    timings_s = {"wall_time_s": time.perf_counter() - wall_start, "slam_time_s": slam_s}
-    metrics = _metrics(path, log, offset, len(used), localizer, replay_map, timings_s)
+    timings_s = {
+        "wall_time_s": time.perf_counter() - wall_start,
+        "slam_time_s": replay.slam_time_s,
+    }
+    _, keyframe_poses = localizer.trajectory(stream.robot.index)
+    metrics = {
+        "log": str(path),
+        "scans": len(log.scans),
+        "scans_used": len(used),
+        "odometry_records": len(log.odometry),
+        "keyframes": len(keyframe_poses),
+        "laser_offset_xytheta": stream.mount.tolist(),
+        "trajectory_frame": "laser (FLASER x y theta), one pose per FLASER line in file order",
+        "skipped_lines": {
+            "count": len(log.skipped_lines),
+            "lines": [number for number, _ in log.skipped_lines],
+        },
+        **replay_metrics(localizer, replay_map, replay.duration_s, timings_s),
+    }
     write_json(out_dir / "metrics.json", metrics)
     return metrics

@@ -56,7 +56,7 @@ from acslam.pipeline.stages import Localizer
 from acslam.replay import Replayed, localize
 from acslam.replay.outputs import PosedScans, replay_metrics, write_maps
 from acslam.ros2 import convert
-from acslam.ros2.bag import BagMessage, BagReader
+from acslam.ros2.bag import BagMessage, BagReader, MemoryBag
 from acslam.ros2.pairing import OdometryPairing
 from acslam.ros2.source import Ros2Topics, resolve
 from acslam.ros2.tf_tree import TfTree
@@ -107,7 +107,7 @@ def _subscriptions(
 
 
 def _read(
-    bag: BagReader, namespaces: Sequence[str], topics: Ros2Topics
+    bag: BagReader | MemoryBag, namespaces: Sequence[str], topics: Ros2Topics
 ) -> tuple[list[BagRobot], dict[str, str]]:
     """Every robot's messages from the bag, and the topics each robot was read from."""
     subscriptions = _subscriptions(namespaces, topics)
@@ -314,15 +314,29 @@ def replay_rosbag(
     algorithms: AlgorithmsConfig | None = None,
     finish: bool = True,
 ) -> BagReplay:
+    """Play the robots of ``namespaces`` ("" = the root) of the bag at ``path`` through
+    the localizer stage ``algorithms`` names (see :func:`replay_bag`)."""
+    with BagReader(path) as bag:
+        return replay_bag(
+            bag, namespaces=namespaces, topics=topics, algorithms=algorithms, finish=finish
+        )
+
+
+def replay_bag(
+    bag: BagReader | MemoryBag,
+    *,
+    namespaces: Sequence[str] = ("",),
+    topics: Ros2Topics | None = None,
+    algorithms: AlgorithmsConfig | None = None,
+    finish: bool = True,
+) -> BagReplay:
     """Play the robots of ``namespaces`` ("" = the root) through the localizer stage
     ``algorithms`` names (default: the simulated robots', a scenario's defaults); without
     ``finish``, no last loop search and settling at the end, as a live run ends (a bag of
     ``acslam run --record`` then replays to the run's own estimate)."""
     algorithms = algorithms or AlgorithmsConfig()
-    path = Path(path)
-    with BagReader(path) as bag:
-        robots, read_topics = _read(bag, namespaces, topics or Ros2Topics())
-    streams = [_stream(path, robot, algorithms.scan_matching) for robot in robots]
+    robots, read_topics = _read(bag, namespaces, topics or Ros2Topics())
+    streams = [_stream(bag.path, robot, algorithms.scan_matching) for robot in robots]
     messages = sorted(
         (message for stream in streams for message in stream.messages),
         key=lambda m: (m.stamp, m.robot_id),

@@ -1,6 +1,6 @@
 """ROS bags without ROS: read ROS 1 ``.bag`` files and rosbag2 recordings (an ``.mcap`` or
 ``.db3`` storage file, or the folder holding them) as ROS 2 messages, and write rosbag2
-recordings as one MCAP file.
+recordings as one MCAP file, or hold one in memory to replay as it would be read back.
 
 Messages are decoded with acslam's own ROS 2 types (:func:`acslam.ros2.wire.typestore`),
 never with the definitions a bag embeds: some writers store placeholders there (the
@@ -167,6 +167,12 @@ class BagReader:
         self.close()
 
 
+def _log_time_ns(stamp_s: float, distro: str) -> int:
+    """The time a message stamped ``stamp_s`` is recorded at: its ROS time, in ns."""
+    stamp = convert.ros_time(stamp_s, distro)
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
 class BagWriter:
     """A rosbag2 recording in MCAP storage, written as the one file ``path`` (``.mcap``):
     what Foxglove opens, and what ``ros2 bag`` reads as a bag (its metadata is inside).
@@ -201,8 +207,7 @@ class BagWriter:
                 offered_qos_profiles=[LATCHED] if latched else [],
             )
             self._connections[topic] = connection
-        stamp = convert.ros_time(stamp_s, self.distro)
-        log_time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        log_time_ns = _log_time_ns(stamp_s, self.distro)
         self._writer.write(connection, log_time_ns, wire.encode_cdr(message, msgtype, self.distro))
 
     def close(self) -> None:
@@ -230,3 +235,36 @@ class BagWriter:
             self.close()
         else:
             self.discard()
+
+
+class MemoryBag:
+    """A rosbag2 recording held in memory: written as :class:`BagWriter` writes one and
+    read as :class:`BagReader` reads it back (by log time, equal times in the order
+    written), without the file. It reads the same messages as the file: a message built
+    by :mod:`acslam.ros2.convert` holds the values its CDR carries, and CDR and MCAP store
+    them exactly."""
+
+    def __init__(self, path: str | Path, distro: str = wire.DEFAULT_DISTRO) -> None:
+        self.path = Path(path)
+        """What the recording is named by in messages and errors (no file is written)."""
+        self.distro = distro
+        self.topics: dict[str, str] = {}
+        """Topic -> message type, as :attr:`BagReader.topics`."""
+        self.counts: dict[str, int] = {}
+        """Topic -> number of messages."""
+        self._messages: list[BagMessage] = []
+
+    def write(self, topic: str, message: Message, stamp_s: float, latched: bool = False) -> None:
+        """Record ``message`` on ``topic`` at ``stamp_s``, as :meth:`BagWriter.write`
+        (``latched`` only matters to a file's subscribers)."""
+        self.topics.setdefault(topic, message.__msgtype__)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+        log_time_ns = _log_time_ns(stamp_s, self.distro)
+        self._messages.append(BagMessage(topic, message.__msgtype__, log_time_ns, message))
+
+    def messages(self, topics: Collection[str] | None = None) -> Iterator[BagMessage]:
+        """The messages of ``topics`` (default: all) by log time, as :meth:`BagReader.messages`."""
+        wanted = set(self.topics if topics is None else topics)
+        for item in sorted(self._messages, key=lambda item: item.log_time_ns):
+            if item.topic in wanted:
+                yield item

@@ -5,7 +5,8 @@ non-finite value, a non-unit quaternion or an inconsistent array layout raises
 :class:`CodecError` naming the message type and field, and no NaN reaches acslam. Builders
 take acslam's own values and raise :class:`MessageError` on invalid ones; they build the
 types of ``distro`` (the message definitions used here are identical in every distro of
-:data:`acslam.ros2.wire.DISTROS`).
+:data:`acslam.ros2.wire.DISTROS`). A built message holds the values its CDR carries (a
+float32 field a float32 value), so it equals the message a bag or the wire gives back.
 
 Frames follow REP 103/105: x forward, y left, yaw counter-clockwise about z; a planar pose
 is ``[x, y, yaw]`` (m, m, rad).
@@ -63,6 +64,11 @@ def _finite(where: str, value: float) -> float:
     if not math.isfinite(value):
         raise CodecError(f"{where}: must be finite, got {value!r}")
     return value
+
+
+def _float32(value: float) -> float:
+    """``value`` as the float32 a message field of that type carries."""
+    return float(np.float32(value))
 
 
 def _check_finite(what: str, values: np.ndarray) -> np.ndarray:
@@ -241,13 +247,13 @@ def laser_scan_msg(
     ranges[scan.ranges == 0.0] = np.nan
     return _types(distro)["sensor_msgs/msg/LaserScan"](
         header=_header(stamp_s, frame_id, distro),
-        angle_min=float(angles[0]),
-        angle_max=float(angles[-1]),
-        angle_increment=float(increment),
+        angle_min=_float32(angles[0]),
+        angle_max=_float32(angles[-1]),
+        angle_increment=_float32(increment),
         time_increment=0.0,
         scan_time=0.0,
-        range_min=range_min_m,
-        range_max=scan.range_max_m,
+        range_min=_float32(range_min_m),
+        range_max=_float32(scan.range_max_m),
         ranges=ranges,
         intensities=np.zeros(0, dtype=np.float32),
     )
@@ -456,7 +462,7 @@ def occupancy_grid_msg(
     types = _types(distro)
     info = types["nav_msgs/msg/MapMetaData"](
         map_load_time=stamp,
-        resolution=spec.resolution_m,
+        resolution=_float32(spec.resolution_m),
         width=spec.cols,
         height=spec.rows,
         origin=pose_msg([spec.origin_x_m, spec.origin_y_m, 0.0], distro=distro),
@@ -512,7 +518,9 @@ def marker_array_msg(
                 action=marker.ADD,
                 pose=pose_msg([0.0, 0.0, 0.0], distro=distro),
                 scale=types["geometry_msgs/msg/Vector3"](x=scale_m, y=scale_m, z=scale_m),
-                color=types["std_msgs/msg/ColorRGBA"](r=rgb[0], g=rgb[1], b=rgb[2], a=1.0),
+                color=types["std_msgs/msg/ColorRGBA"](
+                    r=_float32(rgb[0]), g=_float32(rgb[1]), b=_float32(rgb[2]), a=1.0
+                ),
                 lifetime=types["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
                 frame_locked=False,
                 points=[point(x=x, y=y, z=_MARKER_Z_M) for x, y in xy],

@@ -35,6 +35,7 @@ from acslam.ros2 import convert
 from acslam.ros2.node import Ros2Node, Ros2Options, open_ros2_session
 from acslam.ros2.source import SENSOR_QOS, TF_STATIC_QOS, Ros2Topics, cmd_vel_type, resolve
 from acslam.scenario import Scenario
+from acslam.text import plural
 from acslam.transport import CommandInbox
 from acslam.transport.codec import StatusBeacon, TruthBatch
 
@@ -185,7 +186,7 @@ def run_ros2_robot(
         )
     if len(namespaces) != scenario.robot_count:
         raise TransportError(
-            f"--namespaces: {len(namespaces)} names for a team of {scenario.robot_count}"
+            f"--namespaces: {plural(len(namespaces), 'name')} for a team of {scenario.robot_count}"
         )
     config = scenario.config
     sim = scenario.simulator()
