@@ -17,7 +17,7 @@ from acslam.grid import OCCUPIED
 from acslam.messages import LidarScan, RobotMessage
 from acslam.pipeline.snapshot import Snapshot
 from acslam.replay.outputs import PosedScans, build_map
-from acslam.replay.rosbag import replay_rosbag, run_rosbag
+from acslam.replay.rosbag import replay_bag, run_rosbag
 from acslam.ros2 import convert
 from acslam.ros2.bag import BagReader, BagWriter
 from acslam.ros2.record import BagRecorder
@@ -66,7 +66,8 @@ def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp
         assert topics[f"/{name}/cmd_vel"] == "geometry_msgs/msg/Twist"
         assert topics[f"/{name}/landmarks"] == "sensor_msgs/msg/PointCloud2"
 
-    replay = replay_rosbag(bag_path, namespaces=["robot_0", "robot_1"], finish=False)
+    with BagReader(bag_path) as bag:
+        replay = replay_bag(bag, namespaces=["robot_0", "robot_1"], finish=False)
     period_s = scenario.config.algorithms.planning.control_period_s
     source = RecordedSource(replay.messages, period_s, replay.start_s)
     replayed = []

@@ -306,22 +306,6 @@ class BagReplay:
         return self.messages[-1].stamp - self.start_s if self.messages else 0.0
 
 
-def replay_rosbag(
-    path: str | Path,
-    *,
-    namespaces: Sequence[str] = ("",),
-    topics: Ros2Topics | None = None,
-    algorithms: AlgorithmsConfig | None = None,
-    finish: bool = True,
-) -> BagReplay:
-    """Play the robots of ``namespaces`` ("" = the root) of the bag at ``path`` through
-    the localizer stage ``algorithms`` names (see :func:`replay_bag`)."""
-    with BagReader(path) as bag:
-        return replay_bag(
-            bag, namespaces=namespaces, topics=topics, algorithms=algorithms, finish=finish
-        )
-
-
 def replay_bag(
     bag: BagReader | MemoryBag,
     *,
@@ -359,15 +343,16 @@ def run_rosbag(
     finish: bool = True,
     odometry_map: bool = True,
 ) -> dict:
-    """Replay (:func:`replay_rosbag`), map and write DIR/trajectory*.tum,
+    """Replay the bag at ``path`` (:func:`replay_bag`), map and write DIR/trajectory*.tum,
     map.yaml/.pgm/.png, odometry_vs_slam.png (unless ``odometry_map`` is False) and
     metrics.json."""
     algorithms = algorithms or AlgorithmsConfig()
     path, out_dir = Path(path), Path(out_dir)
     wall_start = time.perf_counter()
-    replay = replay_rosbag(
-        path, namespaces=namespaces, topics=topics, algorithms=algorithms, finish=finish
-    )
+    with BagReader(path) as bag:
+        replay = replay_bag(
+            bag, namespaces=namespaces, topics=topics, algorithms=algorithms, finish=finish
+        )
     kept, localizer = replay.replayed.scans, replay.replayed.localizer
     out_dir.mkdir(parents=True, exist_ok=True)
     slam, odometry = _posed_scans(out_dir, replay.streams, kept, localizer)
