@@ -10,6 +10,8 @@ from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from acslam.files import strict_json, write_json
+
 UNKNOWN = "unknown"
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
 """The checkout acslam runs from (``src/acslam`` lives two levels below it)."""
@@ -25,6 +27,14 @@ def provenance() -> dict[str, str]:
         "command": command_line(),
         "date_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
+
+
+def write_metrics(out_dir: Path, metrics: dict) -> dict:
+    """Write ``out_dir/metrics.json`` with its provenance, as strict JSON; returns the
+    metrics as written (a figure without a value is None, JSON's ``null``)."""
+    written = strict_json({**metrics, "provenance": provenance()})
+    write_json(Path(out_dir) / "metrics.json", written)
+    return written
 
 
 CLI_MODULE = Path(__file__).resolve().with_name("cli.py")

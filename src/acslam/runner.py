@@ -34,12 +34,12 @@ from acslam.eval.metrics import (
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
-from acslam.files import strict_json, write_json, write_text, write_yaml
+from acslam.files import write_text, write_yaml
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
-from acslam.provenance import provenance
+from acslam.provenance import write_metrics
 from acslam.scenario import Scenario
 from acslam.sim.simulator import Simulator
 from acslam.sources import DataSource
@@ -230,9 +230,8 @@ def finish_run(
     without cells) is None, JSON's ``null``."""
     record = _record(scenario, log, truth)
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
-    metrics = strict_json({**metrics, **(extra or {}), "provenance": provenance()})
     _write_outputs(out_dir, scenario, record)
-    write_json(out_dir / "metrics.json", metrics)
+    metrics = write_metrics(out_dir, {**metrics, **(extra or {})})
     write_report(out_dir, record, metrics)
     return metrics
 

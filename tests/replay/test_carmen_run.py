@@ -141,6 +141,8 @@ def test_synthetic_log_trajectory_map_and_metrics(tmp_path: Path) -> None:
     truncated = next(n for n, text in enumerate(lines, start=1) if len(text) == 200)
     assert metrics["skipped_lines"] == {"count": 1, "lines": [truncated]}
     assert metrics == json.loads((out / "metrics.json").read_text())
+    # Replays say what produced them, as runs do.
+    assert set(metrics["provenance"]) == {"acslam_version", "commit", "command", "date_utc"}
     assert metrics["scans_used"] == len(expected)
     assert metrics["loop_closures"]["accepted"] >= 1
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from acslam.config import AlgorithmsConfig
 from acslam.datasets.carmen import LaserRecord, read_carmen
-from acslam.files import write_json
+from acslam.provenance import write_metrics
 from acslam.replay import preset
 from acslam.replay.outputs import PosedScans, replay_metrics, write_maps
 from acslam.replay.rosbag import replay_bag
@@ -95,5 +95,4 @@ def run_carmen(
         },
         **replay_metrics(localizer, replay_map, replay.duration_s, timings_s),
     }
-    write_json(out_dir / "metrics.json", metrics)
-    return metrics
+    return write_metrics(out_dir, metrics)

@@ -29,10 +29,10 @@ from acslam.eval.metrics import (
     pooled_localization_errors,
 )
 from acslam.eval.slam_figures import plot_slam_run
-from acslam.files import write_json
 from acslam.geometry import compose, wrap_angles
 from acslam.messages import LandmarkObservations, RobotMessage, RobotSighting
 from acslam.pipeline.stages import Localizer
+from acslam.provenance import write_metrics
 from acslam.replay import Replayed, localize, preset
 from acslam.trajectory import write_tum
 
@@ -273,7 +273,7 @@ def run_mrclam(
         },
     }
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "metrics.json", metrics)
+    metrics = write_metrics(out_dir, metrics)
     truth_lm = np.array(list(data.landmark_truth.values()))
     mode = "known association" if known_association else "PDA"
     plot_slam_run(

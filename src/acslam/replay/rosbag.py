@@ -47,12 +47,12 @@ import numpy as np
 
 from acslam.config import AlgorithmsConfig, ScanMatchingConfig
 from acslam.errors import ConfigError, DataError, MessageError
-from acslam.files import write_json
 from acslam.geometry import between, compose
 from acslam.mapping.scan_matching import match_scans, prepare_scan, verify
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, RobotMessage
 from acslam.pipeline.perception import KeptScan
 from acslam.pipeline.stages import Localizer
+from acslam.provenance import write_metrics
 from acslam.replay import Replayed, localize
 from acslam.replay.outputs import PosedScans, replay_metrics, write_maps
 from acslam.ros2 import convert
@@ -373,8 +373,7 @@ def run_rosbag(
         "finished": finish,
         **replay_metrics(localizer, replay_map, replay.duration_s, timings_s),
     }
-    write_json(out_dir / "metrics.json", metrics)
-    return metrics
+    return write_metrics(out_dir, metrics)
 
 
 def _robot_metrics(stream: RobotStream, kept: Sequence[KeptScan], localizer: Localizer) -> dict:
