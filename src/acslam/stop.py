@@ -83,6 +83,14 @@ def on_signals() -> Iterator[Signals]:
         _active = None
 
 
+def reclaim() -> None:
+    """Set the driver's handlers again after a library replaced them (``ray.init`` makes
+    SIGTERM exit the process), if :func:`on_signals` is active."""
+    if _active is not None:
+        for signum in REASONS:
+            signal.signal(signum, _record_and_pass_on)
+
+
 def in_worker() -> None:
     """A sweep worker's process initializer: a signal (the driver's, passed on, or the
     terminal's to the whole process group) asks its run to stop; repeated ones change

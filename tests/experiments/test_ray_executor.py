@@ -43,3 +43,39 @@ def test_ray_and_process_pool_give_the_same_runs(tmp_path: Path) -> None:
         assert _metrics(ray_folder) == _metrics(pool_folder)
         assert (ray_folder / "report.html").is_file()
         assert (ray_folder / "trajectories").is_dir()
+
+
+@pytest.mark.slow
+def test_a_signal_to_the_driver_stops_ray_runs_with_their_results(tmp_path: Path) -> None:
+    """SIGTERM to a Ray sweep's driver: the running run ends at its next step with its
+    metrics and report (reason ``interrupted``: ``ray.cancel`` interrupts with SIGINT), and
+    the run still waiting for a CPU never starts, so a resume runs it."""
+    import os
+    import signal
+    import threading
+
+    from acslam import stop
+    from acslam.experiments.ray_executor import RayRunner
+
+    grid = parse_grid(
+        {
+            "name": "long",
+            "max_time_s": 400,  # one robot needs over 300 s to explore exp4
+            "blocks": [{"scenarios": ["thesis-exp4"], "robots": [1], "seeds": [0, 1]}],
+        },
+        "long.yaml",
+    )
+    specs = expand(grid)
+    timer = threading.Timer(15.0, os.kill, (os.getpid(), signal.SIGTERM))
+    with stop.on_signals() as signals:
+        timer.start()
+        results = sweep(specs, tmp_path, RayRunner(local_cpus=1))
+    assert signals.reason == "terminated"
+    (result,) = results
+    assert result.reason == "interrupted" and result.status == "incomplete"
+    folder = tmp_path / "runs" / result.run_id
+    metrics = json.loads((folder / "metrics.json").read_text())
+    assert metrics["reason"] == "interrupted" and metrics["sim_time_s"] < 400
+    assert (folder / "report.html").is_file()
+    (never_started,) = [s for s in specs if s.run_id != result.run_id]
+    assert not (tmp_path / "runs" / never_started.run_id / "metrics.json").exists()

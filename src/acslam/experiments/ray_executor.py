@@ -19,13 +19,19 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
+from acslam import stop
 from acslam.errors import AcslamError
 from acslam.experiments.grid import RunSpec
 from acslam.experiments.sweep import RunResult, execute_run, write_failure
 
 
 def run_packed(spec: RunSpec) -> tuple[RunResult, bytes]:
-    """Run ``spec`` in a scratch folder and return its result and the folder as a tar."""
+    """Run ``spec`` in a scratch folder and return its result and the folder as a tar.
+
+    ``ray.cancel`` interrupts a running task with SIGINT: the run takes it as a stop
+    (:func:`acslam.stop.in_worker`) and still returns its results, reason ``interrupted``.
+    """
+    stop.in_worker()  # Ray reuses worker processes: a fresh record for each run
     with tempfile.TemporaryDirectory(prefix="acslam-ray-") as scratch:
         folder = Path(scratch) / spec.run_id
         result = execute_run(spec, folder)
@@ -40,6 +46,10 @@ def unpack(archive_bytes: bytes, folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     with tarfile.open(fileobj=io.BytesIO(archive_bytes), mode="r:gz") as archive:
         archive.extractall(folder, filter="data")
+
+
+SIGNAL_POLL_S = 0.5
+"""How often the driver looks for a stopping signal while it waits for Ray."""
 
 
 class RayRunner:
@@ -68,14 +78,25 @@ class RayRunner:
                 log_to_driver=False,
                 configure_logging=False,
             )
+            stop.reclaim()
         try:
             task = ray.remote(num_cpus=self.cpus_per_run, max_retries=0)(run_packed)
             pending = {task.remote(spec): (spec, folder) for spec, folder in specs}
+            cancelled = False
             while pending:
-                done, _ = ray.wait(list(pending), num_returns=1)
+                if stop.requested() is not None and not cancelled:
+                    # Running tasks end their run with its results; waiting ones never start.
+                    for ref in pending:
+                        ray.cancel(ref)
+                    cancelled = True
+                done, _ = ray.wait(list(pending), num_returns=1, timeout=SIGNAL_POLL_S)
+                if not done:
+                    continue
                 _, folder = pending.pop(done[0])
                 try:
                     result, archive = ray.get(done[0])
+                except ray.exceptions.TaskCancelledError:
+                    continue  # cancelled before it started: nothing ran, a resume runs it
                 except ray.exceptions.RayError as exc:  # the task or its node died
                     yield write_failure(folder, f"Ray task failed ({type(exc).__name__})", 0.0)
                     continue
