@@ -565,7 +565,8 @@ def _progress(name: str, limit_s: float) -> Iterator[Callable]:
             return
         last_line_s, last_share = now_s, max(share, last_share)
         click.echo(
-            f"{name}: {time_s:.0f} of {limit_s:g} s simulated ({100 * time_s / limit_s:.0f} %), "
+            f"{name}: {time_s:.1f} of {limit_s:g} s simulated "
+            f"({min(100.0, 100 * time_s / limit_s):.0f} %), "
             f"{explored_m2:.1f} m² mapped, "
             f"{plural(len(snapshot.frontier_cells), 'frontier cell')}, "
             f"{now_s - started_s:.0f} s elapsed"
@@ -599,7 +600,7 @@ def _print_summary(metrics: dict) -> None:
     for name, time_s in per_robot_s.items():
         loc = metrics["localization"].get(name)  # none without ground truth (real robots)
         errors = (
-            ["-"] * 3
+            ["—"] * 3
             if loc is None
             else [f"{loc[key]:.3f}" for key in ("rmse_m", "final_dist_m", "rmse_yaw_rad")]
         )
