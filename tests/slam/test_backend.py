@@ -350,3 +350,23 @@ def test_descriptors_keep_a_different_looking_point_off_a_landmark() -> None:
     assert different.is_new and different.landmark == 1
     # Without descriptors geometry alone decides: two landmarks in the gate, ambiguous.
     assert plain.landmark == -1 and not plain.is_new
+
+
+def test_landmark_factors_are_linearized_without_copying_the_graph(monkeypatch) -> None:
+    """iSAM2 hands every CustomFactor its whole linearization point; the back end keeps a
+    Python view of it so that pybind11 passes that view instead of a fresh copy of every
+    value in the graph (what made each landmark factor cost O(trajectory))."""
+    from acslam.slam import factors
+
+    seen: list[object] = []
+    error = factors._observation_error
+
+    def spy(measured, this, values, jacobians):
+        seen.append(values)
+        return error(measured, this, values, jacobians)
+
+    monkeypatch.setattr(factors, "_observation_error", spy)
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    _feed(backend, {0: _circle_truth(np.zeros(3), 0.3, 0.15, 40)}, None)
+    assert len(seen) > 20
+    assert all(values is backend._linearization_point for values in seen)

@@ -84,6 +84,12 @@ class SlamBackend:
         params.relinearizeSkip = config.isam_relinearize_skip
         params.setFactorization(config.isam_factorization)
         self._isam = gtsam.ISAM2(params)
+        # Landmark and sighting factors are CustomFactors: iSAM2 linearizes them with its
+        # whole linearization point, which pybind11 copies into a new Python Values for
+        # every call (O(graph) per factor) unless a Python object already wraps that
+        # Values. This view is such an object (a reference into iSAM2, not a copy), so the
+        # callbacks receive it as is.
+        self._linearization_point = self._isam.getLinearizationPoint()
         self._graph = gtsam.NonlinearFactorGraph()
         self._initial = gtsam.Values()
         self._estimate = gtsam.Values()
