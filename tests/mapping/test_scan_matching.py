@@ -14,14 +14,13 @@ from acslam.datasets.carmen import read_carmen
 from acslam.geometry import between, compose, wrap_angle
 from acslam.grid import GridSpec
 from acslam.mapping.scan_matching import (
-    Keyframe,
     PreparedScan,
-    loop_closure_candidates,
     match_scans,
     prepare_scan,
     verify,
 )
 from acslam.sim.lidar import LidarSensor
+from acslam.slam.loop_candidates import LoopCandidates
 from acslam.worlds.world import World
 
 RES_M = 0.05
@@ -191,19 +190,19 @@ def test_loop_closures_between_revisits_only() -> None:
     true_poses.append(revisit)
     stamps = [0.0, 5.0, 10.0, 60.0]
     drift = np.array([0.15, -0.1, 0.05])  # the estimate of the revisit has drifted
-    keyframes = []
-    for key, (pose, stamp) in enumerate(zip(true_poses, stamps, strict=True)):
+    estimates = np.array([pose + drift if k == 3 else pose for k, pose in enumerate(true_poses)])
+    scans = []
+    candidates = LoopCandidates(NOISY.loop_radius_m, NOISY.loop_min_separation_s, 3)
+    for pose, stamp in zip(true_poses, stamps, strict=True):
         scan = sensor.scan(0, stamp, tuple(pose), NO_DISCS, -1)
-        estimate = pose + drift if key == 3 else pose
-        keyframes.append(
-            Keyframe(key, 0, stamp, estimate, prepare_scan(scan.angles, scan.ranges, NOISY))
-        )
+        scans.append(prepare_scan(scan.angles, scan.ranges, NOISY))
+        candidates.add(0, stamp)
     close = np.hypot(*(true_poses[1][:2] - true_poses[0][:2])) < NOISY.loop_radius_m
-    candidates = loop_closure_candidates(keyframes, NOISY)
-    assert (0, 3) in candidates
-    assert (0, 1) not in candidates or not close  # 5 s apart: neighbours in time
-    guess = between(keyframes[0].pose, keyframes[3].pose)
-    result = match_scans(keyframes[0].scan, keyframes[3].scan, guess, NOISY)
+    pairs = candidates.search(estimates[:, :2], lambda k: estimates[k, :2])
+    assert (0, 3) in pairs
+    assert (0, 1) not in pairs or not close  # 5 s apart: neighbours in time
+    guess = between(estimates[0], estimates[3])
+    result = match_scans(scans[0], scans[3], guess, NOISY)
     assert verify(result, guess, NOISY)
     relative, covariance = result.relative, result.covariance
     error = pose_error(relative, between(true_poses[0], true_poses[3]))

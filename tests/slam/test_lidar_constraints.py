@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from acslam.benchmarks.loop_closure import ExhaustiveSearch
 from acslam.config import LidarConfig, ScanMatchingConfig, SlamConfig
 from acslam.grid import GridSpec
 from acslam.messages import OdometryIncrement
 from acslam.sim.lidar import LidarSensor
 from acslam.slam.backend import SlamBackend
-from acslam.slam.lidar_constraints import LidarConstraints
+from acslam.slam.lidar_constraints import MAX_LOOP_ATTEMPTS, LidarConstraints
 from acslam.worlds.world import World
 
 STEP_M = 0.1
@@ -52,3 +53,75 @@ def test_each_keyframe_is_also_matched_to_the_latest_one_a_baseline_back() -> No
     baseline = {(k - 4, k) for k in range(4, keyframes + 1)}
     assert set(pairs) == previous | baseline
     assert set(_drive(baseline_m=0.0)) == previous
+
+
+def _exhaustive_order(lidar: LidarConstraints, slam: SlamBackend) -> list[tuple[int, int]]:
+    """The pairs the search over all keyframes tries now, in order, from the same tried
+    pairs and attempts, at the scans' current poses."""
+    config, entries = lidar.config, lidar._entries
+    reference = ExhaustiveSearch(
+        np.array([e.robot_id for e in entries]),
+        np.array([e.stamp_s for e in entries]),
+        config.loop_radius_m,
+        config.loop_min_separation_s,
+        MAX_LOOP_ATTEMPTS,
+    )
+    reference.tried = set(lidar._candidates._tried)
+    reference.tries = dict(lidar._candidates._tries)
+    return reference.search(np.array([slam.scans.pose(e.scan_index)[:2] for e in entries]))
+
+
+def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> None:
+    """Two robots drive laps round a 4 m x 3 m room with biased odometry; at every search
+    the pairs tried, and their order, are exactly those of the exhaustive search at the
+    scans' current poses, and the scans' vectorised positions match their poses."""
+    occupied = np.zeros((60, 80), dtype=bool)  # 4 m x 3 m at 5 cm, walls all round
+    occupied[[0, -1], :] = occupied[:, [0, -1]] = True
+    occupied[25:35, 35:45] = True  # a pillar in the middle
+    world = World("room", GridSpec(0.0, 0.0, 0.05, 60, 80), occupied)
+    sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(3))
+    centre, radius_m = np.array([2.0, 1.5]), 1.1
+    starts = {r: np.array([2.0 + radius_m * np.cos(a), 1.5 + radius_m * np.sin(a), a + np.pi / 2])
+              for r, a in ((0, 0.0), (1, np.pi))}  # fmt: skip
+    slam = SlamBackend(SlamConfig(keyframe_distance_m=0.3), starts)
+    lidar = LidarConstraints(ScanMatchingConfig(loop_min_separation_s=10.0))
+    tried: list[tuple[int, int]] = []
+    expected: list[tuple[int, int]] = []
+    constrain = lidar._constrain
+
+    def record(slam, a, b, robust, reference=None) -> bool:
+        if robust:
+            tried.append((lidar._entries.index(a), lidar._entries.index(b)))
+        return constrain(slam, a, b, robust, reference)
+
+    lidar._constrain = record
+    step_rad = 0.1 / radius_m
+    for k in range(160):  # 16 m: two laps and a half each
+        stamp = k * 0.25
+        for r, start in starts.items():
+            angle = np.arctan2(start[1] - centre[1], start[0] - centre[0]) + k * step_rad
+            truth = (
+                *(centre + radius_m * np.array([np.cos(angle), np.sin(angle)])),
+                angle + np.pi / 2,
+            )
+            if k:
+                # 3 % short and turning 2 % less: the laps drift apart until closed.
+                slam.add_odometry(
+                    OdometryIncrement(r, stamp, stamp - 0.25, 0.097, 0.0, 0.98 * step_rad)
+                )
+            scan = sensor.scan(r, stamp, truth, np.zeros((0, 3)), -1)
+            index = slam.add_scan(scan)
+            if index is not None:
+                lidar.add_scan(slam, index, scan)
+        if k % 4 == 3:
+            indices = np.array([e.scan_index for e in lidar._entries])
+            poses = np.array([slam.scans.pose(i) for i in indices])
+            np.testing.assert_allclose(
+                slam.scans.positions(indices), poses[:, :2], rtol=0, atol=1e-12
+            )
+            expected.extend(_exhaustive_order(lidar, slam))
+            lidar.close_loops(slam)
+        slam.update()
+    assert tried == expected
+    assert len(tried) > 30
+    assert lidar.loops_added > 5

@@ -1,8 +1,9 @@
 """LiDAR scan matching (thesis §4.4.1): point-to-surface ICP between two 2D scans.
 
 Turns a pair of scans into a relative-pose constraint with a covariance for the SLAM
-graph, and loop-closure constraints between keyframes close in space, each accepted only
-when :func:`verify` passes.
+graph, between consecutive keyframes and between keyframes close in space (loop closures,
+found by :mod:`acslam.slam.loop_candidates`), each accepted only when :func:`verify`
+passes.
 
 Design:
 
@@ -39,7 +40,6 @@ i.e. ``geometry.between(pose_a, pose_b)`` for sensor poses in the world.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numba
@@ -103,17 +103,6 @@ class Verification:
 
     def __bool__(self) -> bool:
         return self.accepted
-
-
-@dataclass(frozen=True, eq=False)
-class Keyframe:
-    """A keyframe for loop-closure search: its estimated sensor pose in the world."""
-
-    key: int
-    robot_id: int
-    stamp_s: float
-    pose: np.ndarray
-    scan: PreparedScan
 
 
 def _beam_sigmas_m(ranges_m: np.ndarray, config: ScanMatchingConfig) -> tuple[np.ndarray, float]:
@@ -568,21 +557,3 @@ def verify(
     if xy_eigen[-1] > config.max_condition * xy_eigen[0]:
         reasons.append(f"translation covariance condition > {config.max_condition:g}")
     return Verification(not reasons, tuple(reasons))
-
-
-def loop_closure_candidates(
-    keyframes: Sequence[Keyframe], config: ScanMatchingConfig
-) -> list[tuple[int, int]]:
-    """Index pairs (i < j) of keyframes closer than ``loop_radius_m`` that are not
-    neighbours in time: other robots' keyframes, or the same robot's at least
-    ``loop_min_separation_s`` apart."""
-    if len(keyframes) < 2:
-        return []
-    positions = np.array([keyframe.pose[:2] for keyframe in keyframes], dtype=float)
-    pairs = cKDTree(positions).query_pairs(config.loop_radius_m, output_type="ndarray")
-    return [
-        (int(i), int(j))
-        for i, j in sorted(map(tuple, pairs))
-        if keyframes[i].robot_id != keyframes[j].robot_id
-        or abs(keyframes[i].stamp_s - keyframes[j].stamp_s) >= config.loop_min_separation_s
-    ]

@@ -103,6 +103,10 @@ class SlamBackend:
         # estimated): users placed the keyframe's scans there.
         self._reported_keys = np.zeros(0, dtype=np.uint64)
         self._reported_positions = np.zeros((0, 3))
+        # The estimate's pose keys (sorted) and their extractPose3 rows: rotation matrix
+        # row by row, then translation.
+        self._pose_keys = np.zeros(0, dtype=np.uint64)
+        self._pose_table = np.zeros((0, 12))
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
         self.update_durations_s: list[float] = []
         self.association = LandmarkAssociation(self)
@@ -234,7 +238,8 @@ class SlamBackend:
         self._pending_landmark_covs.clear()
         if len(self._landmark_positions):
             self._landmark_positions = np.asarray(gtsam.utilities.extractPoint3(estimate))
-        self._moved = self._report_moves(*self._pose_positions(estimate))
+        self._pose_keys, self._pose_table = self._pose_rows(estimate)
+        self._moved = self._report_moves(self._pose_keys, self._pose_table[:, 9:12])
 
     def _report_moves(self, pose_keys: np.ndarray, positions: np.ndarray) -> list[tuple[int, int]]:
         """Keyframes now more than correction_threshold_m from where they were last
@@ -259,14 +264,14 @@ class SlamBackend:
         return [keys.decode_pose_key(int(k)) for k in pose_keys[moved]]
 
     @staticmethod
-    def _pose_positions(values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
-        """Sorted pose keys of ``values`` and their (N, 3) translations."""
+    def _pose_rows(values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+        """Sorted pose keys of ``values`` and their (N, 12) extractPose3 rows."""
         all_keys = np.asarray(values.keys(), dtype=np.uint64)
         pose_keys = all_keys[(all_keys >> np.uint64(56)) == _POSE_CHAR_CODE]
         if len(pose_keys) == 0:
-            return pose_keys, np.zeros((0, 3))
+            return pose_keys, np.zeros((0, 12))
         table = np.asarray(gtsam.utilities.extractPose3(values)).reshape(-1, 12)
-        return np.sort(pose_keys), table[:, 9:12]
+        return np.sort(pose_keys), table
 
     def _marginal(self, key: int) -> np.ndarray:
         cov = self._marginals.get(key)
@@ -326,6 +331,25 @@ class SlamBackend:
         if self._estimate.exists(key):
             return self._estimate.atPose3(key)
         return self._initial.atPose3(key)
+
+    def planar_poses(self, pose_keys: np.ndarray) -> np.ndarray:
+        """(k, 3) ``[x, y, yaw]`` of many keyframes at once: :meth:`pose_estimate` in the
+        plane, vectorised over the last update's estimate. The yaw is atan2(R10, R00) of
+        the rotation, GTSAM's own yaw up to rounding (for any small roll and pitch, since
+        both read the same Z-Y-X angles). Keyframes not optimised yet are read one by one.
+        """
+        pose_keys = np.asarray(pose_keys, dtype=np.uint64)
+        rows = np.searchsorted(self._pose_keys, pose_keys)
+        found = rows < len(self._pose_keys)
+        found[found] = self._pose_keys[rows[found]] == pose_keys[found]
+        table = self._pose_table[rows[found]]
+        poses = np.empty((len(pose_keys), 3))
+        poses[found] = np.column_stack(
+            [table[:, 9], table[:, 10], np.arctan2(table[:, 3], table[:, 0])]
+        )
+        for k in np.flatnonzero(~found):
+            poses[k] = pose3_to_planar(self.pose_estimate(int(pose_keys[k])))
+        return poses
 
     def pose_covariance(self, robot: _Robot) -> np.ndarray:
         """6x6 marginal of the latest keyframe; a pending one adds its odometry variances."""

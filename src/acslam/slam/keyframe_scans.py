@@ -30,6 +30,10 @@ class KeyframeScans:
         self.backend = backend
         self._scans: list[tuple[LidarScan, int, np.ndarray]] = []
         self._by_keyframe: dict[int, list[int]] = {}
+        # Each scan's keyframe key and offset again as arrays (with spare rows), for
+        # :meth:`positions`.
+        self._keys = np.zeros(64, dtype=np.uint64)
+        self._offsets = np.zeros((64, 3))
 
     def add(self, msg: LidarScan) -> int | None:
         """Store a scan with its robot's latest keyframe and the odometry offset since it.
@@ -42,6 +46,11 @@ class KeyframeScans:
         index = len(self._scans)
         keyframe = robot.pose_keys[-1]
         self._scans.append((msg, keyframe, robot.offset.copy()))
+        if index == len(self._keys):
+            self._keys = np.concatenate([self._keys, np.zeros_like(self._keys)])
+            self._offsets = np.concatenate([self._offsets, np.zeros_like(self._offsets)])
+        self._keys[index] = keyframe
+        self._offsets[index] = robot.offset
         self._by_keyframe.setdefault(keyframe, []).append(index)
         return index
 
@@ -55,6 +64,21 @@ class KeyframeScans:
         """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
         _, key, offset = self._scans[index]
         return compose(pose3_to_planar(self.backend.pose_estimate(key)), offset)
+
+    def positions(self, indices: np.ndarray) -> np.ndarray:
+        """(k, 2) current world positions of many stored scans at once: :meth:`pose`'s
+        ``[x, y]``, vectorised, equal to it up to rounding (see
+        :meth:`~acslam.slam.backend.SlamBackend.planar_poses`)."""
+        indices = np.asarray(indices, dtype=np.intp)
+        keyframes = self.backend.planar_poses(self._keys[indices])
+        offsets = self._offsets[indices]
+        c, s = np.cos(keyframes[:, 2]), np.sin(keyframes[:, 2])
+        return np.column_stack(
+            [
+                keyframes[:, 0] + c * offsets[:, 0] - s * offsets[:, 1],
+                keyframes[:, 1] + s * offsets[:, 0] + c * offsets[:, 1],
+            ]
+        )
 
     def keyframe(self, index: int) -> tuple[int, int]:
         """``(robot_id, keyframe_index)`` stored scan ``index`` is attached to."""

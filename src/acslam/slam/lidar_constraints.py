@@ -21,16 +21,10 @@ import numpy as np
 
 from acslam.config import ScanMatchingConfig
 from acslam.geometry import between, transform_points
-from acslam.mapping.scan_matching import (
-    Keyframe,
-    PreparedScan,
-    loop_closure_candidates,
-    match_scans,
-    prepare_scan,
-    verify,
-)
+from acslam.mapping.scan_matching import PreparedScan, match_scans, prepare_scan, verify
 from acslam.messages import LidarScan
 from acslam.slam.backend import SlamBackend
+from acslam.slam.loop_candidates import LoopCandidates
 
 MAX_LOOP_ATTEMPTS = 3
 """Loop-closure matches tried per keyframe (as the later keyframe of a pair)."""
@@ -60,8 +54,10 @@ class LidarConstraints:
         self.submap_keyframes = config.submap_keyframes
         self._entries: list[_KeyframeScan] = []
         self._by_keyframe: dict[tuple[int, int], int] = {}
-        self._tried: set[tuple[int, int]] = set()
-        self._attempts: dict[int, int] = {}
+        self._candidates = LoopCandidates(
+            config.loop_radius_m, config.loop_min_separation_s, MAX_LOOP_ATTEMPTS
+        )
+        self._scan_indices = np.zeros(64, dtype=np.intp)  # per entry, with spare rows
         self.sequential_added = 0
         self.sequential_rejected = 0
         self.loops_added = 0
@@ -80,8 +76,12 @@ class LidarConstraints:
             before = self._entries[previous]
             step = between(slam.scans.pose(before.scan_index), slam.scans.pose(scan_index))
             path_m = before.path_m + float(np.hypot(step[0], step[1]))
+        if len(self._entries) == len(self._scan_indices):
+            self._scan_indices = np.concatenate([self._scan_indices, self._scan_indices])
+        self._scan_indices[len(self._entries)] = scan_index
         self._by_keyframe[(robot_id, keyframe)] = len(self._entries)
         self._entries.append(_KeyframeScan(scan_index, robot_id, scan.stamp, prepared, path_m))
+        self._candidates.add(robot_id, scan.stamp)
         if previous is None:
             return
         reference = self._submap(slam, robot_id, keyframe - 1)
@@ -116,21 +116,17 @@ class LidarConstraints:
 
         The cap is ours: a robot that passes a place many times (or turns on the spot)
         has dozens of candidates per keyframe, and matching them all costs far more than
-        the few closures each keyframe needs.
+        the few closures each keyframe needs. The pairs are those of a search over all
+        keyframes at their current poses, found in time that follows what moved and what
+        is near (:mod:`acslam.slam.loop_candidates`).
         """
-        keyframes = [
-            Keyframe(k, e.robot_id, e.stamp_s, slam.scans.pose(e.scan_index), e.scan)
-            for k, e in enumerate(self._entries)
-        ]
-        pairs = [p for p in loop_closure_candidates(keyframes, self.config) if p not in self._tried]
-        gaps = [float(np.hypot(*(keyframes[i].pose[:2] - keyframes[j].pose[:2]))) for i, j in pairs]
+        pairs = self._candidates.search(
+            slam.scans.positions(self._scan_indices[: len(self._entries)]),
+            lambda k: slam.scans.pose(self._entries[k].scan_index)[:2],
+        )
         added = 0
-        for _, pair in sorted(zip(gaps, pairs, strict=True)):
-            if self._attempts.get(pair[1], 0) >= MAX_LOOP_ATTEMPTS:
-                continue
-            self._attempts[pair[1]] = self._attempts.get(pair[1], 0) + 1
-            self._tried.add(pair)
-            if self._constrain(slam, self._entries[pair[0]], self._entries[pair[1]], robust=True):
+        for earlier, later in pairs:
+            if self._constrain(slam, self._entries[earlier], self._entries[later], robust=True):
                 added += 1
             else:
                 self.loops_rejected += 1
