@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from acslam.benchmarks.loop_closure import ExhaustiveSearch
+from acslam.benchmarks.loop_closure import ExhaustiveSearch, measure_loop_candidate_search
 from acslam.slam.loop_candidates import LoopCandidates
 
 RADIUS_M = 2.0
@@ -98,3 +98,13 @@ def test_bad_parameters_are_refused() -> None:
         LoopCandidates(RADIUS_M, SEPARATION_S, ATTEMPTS, slack_m=0.1, tolerance_m=0.05)
     with pytest.raises(ValueError, match="attempts"):
         LoopCandidates(RADIUS_M, SEPARATION_S, 0)
+
+
+def test_loop_search_benchmark_checks_itself_against_the_exhaustive_search() -> None:
+    """The corridor benchmark on 600 keyframes: the robots share the corridor, so its
+    searches try pairs across robots before any lap closes, and every 25th search is
+    compared with the exhaustive search (the benchmark raises on any difference)."""
+    result = measure_loop_candidate_search(keyframes=600, robots=3, seed=1)
+    assert [b["searches"] for b in result["buckets"]] == [60]
+    assert result["buckets"][0]["references"] == 2
+    assert result["pairs_tried"] > 0

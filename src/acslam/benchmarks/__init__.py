@@ -2,8 +2,9 @@
 
 Groups: server (cycle per module in a short default run), mapping, scan matching,
 exploration (EWFD vs the naive frontier scan, clustering, allocation), planning (A* vs
-pyastar2d or scipy, FGP per team size), slam (iSAM2 vs graph size), simulator (real-time
-factor). ``--quick`` shrinks every problem so the whole set takes about a minute.
+pyastar2d or scipy, FGP per team size), slam (iSAM2 and the loop-closure candidate search
+vs graph size), simulator (real-time factor). ``--quick`` shrinks every problem so the
+whole set takes about a minute.
 """
 
 from __future__ import annotations
