@@ -304,6 +304,10 @@ class SlamConfig(StageParams):
     association_min_probability: Probability = 0.05
     landmark_confirmations: Annotated[int, Field(ge=1)] = 3
     tentative_timeout_s: PositiveFloat = 10.0
+    # A landmark's covariance relative to a robot's keyframe, from one iSAM2 joint
+    # marginal, serves that robot's frames for this many keyframes after it, with the
+    # odometry chain since added (0: a joint marginal in every frame).
+    association_covariance_reuse_keyframes: Annotated[int, Field(ge=0)] = 5
     # A point and a landmark that both carry binary descriptors (ORB: 256 bits) are
     # candidates only within this Hamming distance; ORB-SLAM matches within 50-100 bits.
     association_max_descriptor_bits: Annotated[int, Field(ge=0)] = 64

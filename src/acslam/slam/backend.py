@@ -299,9 +299,10 @@ class SlamBackend:
 
     def landmark_blocks(
         self, ref_key: int | None, columns: list[int]
-    ) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
-        """Marginal covariance of each landmark column and its cross-covariance with the
-        reference pose (one iSAM2 joint marginal for the frame; None where unavailable)."""
+    ) -> tuple[np.ndarray | None, list[np.ndarray], list[np.ndarray | None]]:
+        """The reference pose's 6x6 marginal, and the marginal covariance of each landmark
+        column and its cross-covariance with the reference pose, from one iSAM2 joint
+        marginal (None where unavailable)."""
         lm_covs: list[np.ndarray] = []
         cross: list[np.ndarray | None] = []
         optimised = [
@@ -324,7 +325,8 @@ class SlamBackend:
             else:
                 lm_covs.append(self._landmark_covariance(i))
                 cross.append(None)
-        return lm_covs, cross
+        pose_cov = None if joint is None else np.asarray(joint.at(ref_key, ref_key))
+        return pose_cov, lm_covs, cross
 
     def pose_estimate(self, key: int) -> gtsam.Pose3:
         """The optimised pose of ``key``, or its initial guess before the first update."""

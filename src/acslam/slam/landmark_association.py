@@ -36,6 +36,8 @@ from acslam.slam.factors import (
 )
 
 if TYPE_CHECKING:
+    import gtsam
+
     from acslam.config import SlamConfig
     from acslam.slam.backend import SlamBackend, _Robot
 
@@ -64,6 +66,16 @@ class _Frame:
     world: list[np.ndarray] = field(default_factory=list)
     sensor: list[np.ndarray] = field(default_factory=list)
     cov: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _Relative:
+    """A landmark's covariance in the frame of one of a robot's keyframes, from an iSAM2
+    joint marginal, for that robot's next frames."""
+
+    kf_index: int
+    pose_key: int
+    covariance: np.ndarray  # 3x3, in the keyframe's body frame
 
 
 @dataclass
@@ -150,6 +162,7 @@ class LandmarkAssociation:
         self._known_landmarks: dict[int, int] = {}
         self._descriptors: dict[int, np.ndarray] = {}  # landmark -> its first descriptor
         self._tentatives: list[_Tentative] = []
+        self._relative: dict[tuple[int, int], _Relative] = {}  # by (robot, landmark)
         self.robot_observations = 0
         self.dropped_ambiguous = 0
         self.tentative_observations = 0
@@ -231,8 +244,10 @@ class LandmarkAssociation:
 
         Columns are the confirmed landmarks within the Euclidean pre-gate of some point and
         this robot's live tentative landmarks. Innovation covariances use the pose-landmark
-        cross-covariance from iSAM2 for confirmed landmarks, and for a tentative one the
-        odometry chain between the keyframe it was last seen from and now.
+        cross-covariance from an iSAM2 joint marginal for confirmed landmarks (or, within
+        ``association_covariance_reuse_keyframes`` of this robot's last one, the landmark's
+        covariance relative to that keyframe plus the odometry chain since), and for a
+        tentative one the odometry chain between the keyframe it was last seen from and now.
         """
         self._expire_tentatives(robot.robot_id, stamp)
         scores = self._score_frame(robot, frame)
@@ -275,9 +290,14 @@ class LandmarkAssociation:
             return scores
         ref_key, ref_pose, ref_cov = backend.reference(robot)
         ref_rot = ref_pose.rotation().matrix()
-        lm_covs, cross = backend.landmark_blocks(ref_key, confirmed)
-        col_of = {i: c for c, i in enumerate(confirmed)}
         now_index = len(robot.pose_keys) - 1
+        reused = self._reusable(robot.robot_id, confirmed, now_index)
+        queried = [i for i in confirmed if i not in reused]
+        pose_block, lm_covs, cross = backend.landmark_blocks(ref_key, queried)
+        if pose_block is not None:
+            self._remember(robot.robot_id, ref_key, ref_pose, pose_block, queried, lm_covs, cross)
+        query_of = {i: q for q, i in enumerate(queried)}
+        col_of = {i: c for c, i in enumerate(confirmed)}
         tent_geometry = []
         for t in tentatives:
             key, z_kf, cov_kf = t.observations[-1]
@@ -286,11 +306,16 @@ class LandmarkAssociation:
             tent_geometry.append((np.asarray(pose.transformFrom(z_kf)), rot @ cov_kf @ rot.T))
         for n in range(len(world)):
             lever = pose_lever_jacobian(ref_rot, np.asarray(ref_pose.transformTo(world[n])))
-            for i in alike(self.config, frame, n, per_point[n], self._descriptors):
-                c = col_of[int(i)]
-                s = innovation_covariance(lever, ref_cov, lm_covs[c], cross[c], frame.sensor[n])
-                self._score(scores, n, c, world[n] - positions[i], s)
             rho2 = float(frame.kf[n][:2] @ frame.kf[n][:2])
+            for i in alike(self.config, frame, n, per_point[n], self._descriptors):
+                if i in reused:
+                    since, relative = reused[i]
+                    chain = chain_variance(robot, since, now_index, rho2)
+                    s = relative + np.diag([chain, chain, 0.0]) + frame.sensor[n]
+                else:
+                    q = query_of[i]
+                    s = innovation_covariance(lever, ref_cov, lm_covs[q], cross[q], frame.sensor[n])
+                self._score(scores, n, col_of[i], world[n] - positions[i], s)
             for k, (position, cov) in enumerate(tent_geometry):
                 innovation = world[n] - position
                 if np.linalg.norm(innovation) > self.config.association_gate_m:
@@ -301,6 +326,54 @@ class LandmarkAssociation:
                 s = frame.sensor[n] + cov + np.diag([chain, chain, 0.0])
                 self._score(scores, n, len(confirmed) + k, innovation, s)
         return scores
+
+    def _reusable(
+        self, robot_id: int, landmarks: list[int], now_index: int
+    ) -> dict[int, tuple[int, np.ndarray]]:
+        """Landmarks whose covariance relative to one of this robot's keyframes is recent
+        enough to reuse: keyframe index and that covariance in the world frame (rotated by
+        the keyframe's current estimate).
+
+        The innovation covariance of a re-observed landmark is its uncertainty relative
+        to the robot; from a keyframe a few steps back, the odometry chain since then adds
+        to it (as for tentatives, :func:`chain_variance`). That leaves out what the graph
+        learnt since, so it errs on the wide side, and it saves the joint marginal, whose
+        cost grows with the graph, in most frames.
+        """
+        reuse = self.config.association_covariance_reuse_keyframes
+        found: dict[int, tuple[int, np.ndarray]] = {}
+        for i in landmarks:
+            relative = self._relative.get((robot_id, i))
+            if relative is None or now_index - relative.kf_index >= reuse:
+                continue
+            rotation = self.backend.pose_estimate(relative.pose_key).rotation().matrix()
+            found[i] = (relative.kf_index, rotation @ relative.covariance @ rotation.T)
+        return found
+
+    def _remember(
+        self,
+        robot_id: int,
+        ref_key: int,
+        ref_pose: gtsam.Pose3,
+        pose_block: np.ndarray,
+        landmarks: list[int],
+        lm_covs: list[np.ndarray],
+        cross: list[np.ndarray | None],
+    ) -> None:
+        """Keep each landmark's covariance in the frame of the reference keyframe, from the
+        joint marginal of both: J [[P, C], [C^T, L]] J^T with J the Jacobians of
+        Pose3.transformTo."""
+        kf_index = keys.decode_pose_key(ref_key)[1]
+        positions = self.backend.landmark_positions
+        for i, lm_cov, pose_lm in zip(landmarks, lm_covs, cross, strict=True):
+            if pose_lm is None:
+                continue
+            h_pose = np.zeros((3, 6), order="F")
+            h_point = np.zeros((3, 3), order="F")
+            ref_pose.transformTo(positions[i], h_pose, h_point)
+            jac = np.hstack([h_pose, h_point])
+            cov = jac @ np.block([[pose_block, pose_lm], [pose_lm.T, lm_cov]]) @ jac.T
+            self._relative[(robot_id, i)] = _Relative(kf_index, ref_key, 0.5 * (cov + cov.T))
 
     def _decide(
         self,
