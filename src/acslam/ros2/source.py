@@ -99,6 +99,22 @@ class _Robot:
     truth: list[tuple[float, float, float, float]] = field(default_factory=list)
     last_plan: object = None
 
+    def joins_base(self, frame: str | None) -> bool:
+        """Whether static transforms place ``frame`` in the odometry's base frame."""
+        return (
+            frame is not None
+            and self.base_frame is not None
+            and self.tf.lookup(self.base_frame, frame) is not None
+        )
+
+    def take_scan_frame(self, frame: str) -> None:
+        """Before the start, the scan frame is the latest scan's, so a laser that comes up
+        after its first scans is still found; but once it joins the base frame, a scan in
+        a frame that does not is a stray one, dropped instead of replacing it."""
+        if self.joins_base(self.scan_frame) and not self.joins_base(frame):
+            raise _UnknownFrameError(f"scan in {frame!r}, not {self.scan_frame!r}")
+        self.scan_frame = frame
+
 
 class Ros2Source(LiveSource):
     """The team's ROS 2 topics as the server's messages, and the server's decisions back
@@ -327,7 +343,7 @@ class Ros2Source(LiveSource):
             stamp_s = self._stamp(convert.header_stamp_s(message))
             scan = convert.laser_scan(message, robot.index, stamp_s)
             if robot.pairing is None:
-                robot.scan_frame = frame
+                robot.take_scan_frame(frame)
                 return []
             if frame != robot.scan_frame:
                 raise _UnknownFrameError(f"scan in {frame!r}, not {robot.scan_frame!r}")
