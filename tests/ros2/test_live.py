@@ -68,20 +68,32 @@ def test_served_run_with_the_legacy_attachment(tiny_scenario: Path, tmp_path: Pa
     robots = [robot(i) for i in range(2)]
     session = open_ros2_session(connect=[endpoint], timeout_s=60)
     try:
-        _until(lambda: any("/NN/%/%/acslam_server" in t for t in _tokens(session)), 60)
-        tokens = _tokens(session)
-        # The graph that `ros2 node list` / `ros2 topic list` read: the server node, the
-        # transient-local map publisher, a robot's driver and its scan publisher.
-        assert any(
-            t.endswith(
+        # The graph that `ros2 node list` / `ros2 topic list` read: the server node, its
+        # transient-local map publisher, a robot's driver and the server's subscription to
+        # a robot's odometry. Tokens are declared one after another, as in ROS 2's
+        # discovery: wait until all are seen.
+        expected = (
+            lambda t: "/NN/%/%/acslam_server" in t,
+            lambda t: t.endswith(
                 "/MP/%/%/acslam_server/%map/nav_msgs::msg::dds_::"
                 "OccupancyGrid_/TypeHashNotSupported/:1:,1:,:,:,,"
-            )
-            for t in tokens
+            ),
+            lambda t: "/NN/%/%alpha/turtlebot3_node" in t,
+            lambda t: "/MS/%/%/acslam_server/%beta%odom/nav_msgs::msg::dds_::Odometry_/" in t,
         )
-        assert any("/NN/%/%alpha/turtlebot3_node" in t for t in tokens)
-        assert any("/MS/%/%/acslam_server/%beta%odom/nav_msgs::msg::dds_::Odometry_/" in t
-                   for t in tokens)  # fmt: skip
+
+        def graph_complete() -> bool:
+            tokens = _tokens(session)
+            return all(any(found(t) for t in tokens) for found in expected)
+
+        _until(graph_complete, 60)
+        # The server publishes alpha's map -> odom once alpha's run has started: from then
+        # on each malformed message below has exactly one way to be dropped.
+        started = []
+        tf_key = wire.topic_key(0, "/alpha/tf", "tf2_msgs/msg/TFMessage", "humble")
+        watch = session.declare_subscriber(tf_key, lambda sample: started.append(True))
+        _until(lambda: started, 60)
+        watch.undeclare()
         _send_malformed(session)
         time.sleep(8.0)  # the map has been published several times before this joins
         maps = []
