@@ -47,3 +47,14 @@ def timed_s(run: Callable[[], object]) -> float:
     start = time.perf_counter()
     run()
     return time.perf_counter() - start
+
+
+def spread_ms(values_ms: np.ndarray, prefix: str = "", empty: float | None = None) -> dict:
+    """``<prefix>mean_ms`` and ``<prefix>p95_ms`` of a bucket of timings (``empty`` for
+    both when the bucket has none): how a cost reads per graph size."""
+    if len(values_ms) == 0:
+        return {f"{prefix}mean_ms": empty, f"{prefix}p95_ms": empty}
+    return {
+        f"{prefix}mean_ms": float(np.mean(values_ms)),
+        f"{prefix}p95_ms": float(np.percentile(values_ms, 95)),
+    }

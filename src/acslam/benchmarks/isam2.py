@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from acslam.benchmarks.core import spread_ms
 from acslam.config import SlamConfig
 from acslam.geometry import between
 from acslam.messages import LandmarkObservations, OdometryIncrement
@@ -130,12 +131,10 @@ def measure_isam2_updates(keyframes: int, robots: int, seed: int) -> dict:
                 "from": start,
                 "to": min(start + BUCKET, keyframes),
                 "updates": len(chunk),
-                "mean_ms": float(chunk.mean()),
-                "p95_ms": float(np.percentile(chunk, 95)),
+                **spread_ms(chunk),
                 "max_ms": float(chunk.max()),
                 "per_keyframe_p95_ms": float(np.percentile(per_keyframe_ms[here], 95)),
-                "association_mean_ms": float(frames.mean()) if len(frames) else 0.0,
-                "association_p95_ms": float(np.percentile(frames, 95)) if len(frames) else 0.0,
+                **spread_ms(frames, "association_", empty=0.0),
             }
         )
     return {

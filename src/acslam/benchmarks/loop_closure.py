@@ -20,6 +20,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from acslam.benchmarks.core import spread_ms
 from acslam.config import ScanMatchingConfig
 from acslam.slam.lidar_constraints import MAX_LOOP_ATTEMPTS
 from acslam.slam.loop_candidates import LoopCandidates
@@ -145,8 +146,7 @@ def measure_loop_candidate_search(keyframes: int, robots: int, seed: int) -> dic
                 "from": start,
                 "to": min(start + BUCKET, keyframes),
                 "searches": len(rows),
-                "index_mean_ms": float(index_ms.mean()),
-                "index_p95_ms": float(np.percentile(index_ms, 95)),
+                **spread_ms(index_ms, "index_"),
                 "exhaustive_mean_ms": float(reference_ms.mean()) if len(reference_ms) else None,
                 "references": len(reference_ms),
             }
