@@ -420,6 +420,25 @@ def test_occupancy_grid_cell_order_matches_ros() -> None:
     assert convert.header_stamp_s(message) == 5.0 and convert.frame_id(message) == "map"
 
 
+def test_published_map_is_its_known_box_at_the_same_world_places() -> None:
+    spec = GridSpec(origin_x_m=-3.0, origin_y_m=2.0, resolution_m=0.25, rows=40, cols=50)
+    cells = np.full(spec.shape, UNKNOWN, dtype=np.int8)
+    cells[10:15, 20:32] = FREE
+    cells[12, 31] = OCCUPIED
+    cells[16, 25] = OCCUPIED  # a wall cell one row past the free area
+    message = through_cdr(convert.known_map_msg(cells, spec, 1.0))
+    info = message.info
+    assert (info.height, info.width) == (7, 12)  # rows 10..16, columns 20..31
+    assert (info.origin.position.x, info.origin.position.y) == (-3.0 + 20 * 0.25, 2.0 + 10 * 0.25)
+    ros = np.asarray(message.data).reshape(info.height, info.width)
+    for row, col in np.argwhere(cells != UNKNOWN):  # every known cell, found by its world x, y
+        x, y = spec.cell_to_world(np.array([[row, col]]))[0]
+        ros_row = math.floor((y - info.origin.position.y) / info.resolution)
+        ros_col = math.floor((x - info.origin.position.x) / info.resolution)
+        assert ros[ros_row, ros_col] == cells[row, col]
+    assert (ros != UNKNOWN).sum() == (cells != UNKNOWN).sum()
+
+
 def test_occupancy_grid_refuses_invalid_cells() -> None:
     spec = GridSpec(0.0, 0.0, 0.1, 2, 2)
     with pytest.raises(MessageError, match="lie in"):

@@ -17,10 +17,10 @@ Per robot namespace ``robot_<i>`` (:func:`acslam.runner.robot_name`):
 - ``cmd_vel`` (``geometry_msgs/Twist``), the server's command of every step,
 - ``ground_truth`` (``nav_msgs/Odometry`` in frame ``world``), written when the run ends,
 
-and for the team ``/map`` (``nav_msgs/OccupancyGrid``, transient local) every
-:data:`MAP_PERIOD_S` while it changes, and at the end. The frames of every robot are
-named alike, each robot's transforms being on its own ``tf`` topics (remap ``/tf`` to
-``/robot_<i>/tf`` in RViz to follow one robot).
+and for the team ``/map`` (``nav_msgs/OccupancyGrid``, transient local, cropped to its
+known cells) every :data:`MAP_PERIOD_S` while it changes, and at the end. The frames of
+every robot are named alike, each robot's transforms being on its own ``tf`` topics
+(remap ``/tf`` to ``/robot_<i>/tf`` in RViz to follow one robot).
 
 Stamps are simulated seconds. Only what the server received is recorded, as it received
 it, so the bag replays to the run's own trajectories. A scan's ``range_min`` is 0 and its
@@ -169,8 +169,6 @@ class BagRecorder:
         if snapshot.map.version == self._map_version:
             return
         values = snapshot.map.occupancy_values()
-        grid = convert.occupancy_grid_msg(
-            values, self.spec, snapshot.time_s, MAP_FRAME, self.distro
-        )
+        grid = convert.known_map_msg(values, self.spec, snapshot.time_s, MAP_FRAME, self.distro)
         self._writer.write(self._map_topic, grid, snapshot.time_s, latched=True)
         self._map_version = snapshot.map.version

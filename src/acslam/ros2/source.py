@@ -6,7 +6,7 @@ namespace unless they start with ``/``) the source subscribes to ``scan``
 (``sensor_msgs/PointCloud2``, x y z in the base frame) and ``tf_static`` (the laser's
 mount), and publishes ``cmd_vel``, ``tf`` (``map -> odom``, REP 105: never
 ``map -> base``) and ``plan``; for the team, ``/map`` (transient local, so a late RViz
-still gets it) and frontier, cluster and goal markers.
+still gets it; cropped to its known cells) and frontier, cluster and goal markers.
 
 The robots keep their own clocks and odometry frames. Stamps become seconds since the
 source started (:attr:`clock_origin_s`), odometry poses stay in each robot's ``odom``
@@ -383,7 +383,7 @@ class Ros2Source(LiveSource):
     def _publish_map(self, snapshot: Snapshot, now_s: float) -> None:
         spec = self.map_spec
         values = snapshot.map.occupancy_values()
-        self._map.put(convert.occupancy_grid_msg(values, spec, now_s, "map", self._distro))
+        self._map.put(convert.known_map_msg(values, spec, now_s, "map", self._distro))
         frontier_xy = spec.cell_to_world(snapshot.frontier_cells)
         targets = [c.target_m for c in snapshot.clusters]
         goals = [g for g in snapshot.goals_m if g is not None]
