@@ -28,11 +28,17 @@ def _exploration(quick: bool) -> list[Figure]:
     from acslam.benchmarks.perception import (
         bench_allocation,
         bench_frontiers,
+        bench_frontiers_large,
         bench_travel_distances,
     )
 
     figures, final_map = bench_frontiers(quick)
-    return figures + bench_allocation(quick, **final_map) + bench_travel_distances(quick)
+    return (
+        figures
+        + bench_frontiers_large(quick)
+        + bench_allocation(quick, **final_map)
+        + bench_travel_distances(quick)
+    )
 
 
 def _runners() -> dict[str, Callable[[bool], list[Figure]]]:
