@@ -213,6 +213,21 @@ def _scripted_paths(world: World, rng: np.random.Generator, rounds: int) -> list
     return paths
 
 
+def _both_detectors(
+    detector: EwfdFrontierDetector, values: np.ndarray, robot_cells: np.ndarray, step: int
+) -> tuple[np.ndarray, tuple[float, float]]:
+    """EWFD's update and the naive scan on the same map, which must give the same cells;
+    returns EWFD's cells and the seconds each took."""
+    t0 = time.perf_counter()
+    got = detector.update(values, robot_cells, robot_cells)
+    t1 = time.perf_counter()
+    expected = reachable_frontier_cells(values, robot_cells)
+    t2 = time.perf_counter()
+    if not np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected):
+        raise AssertionError(f"EWFD and the naive scan disagree at round {step}")
+    return got, (t1 - t0, t2 - t1)
+
+
 def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
     """Incremental EWFD against the naive full-grid scan on the same map, thesis world 4.
 
@@ -238,16 +253,10 @@ def bench_frontiers(quick: bool) -> tuple[list[Figure], dict]:
             team.add_scan(k, (k, step), scan.ranges, scan.angles, pose, scan.range_max_m)
         values = team.occupancy_values()
         robot_cells = world.spec.world_to_cell(positions)
-        t0 = time.perf_counter()
-        got = detector.update(values, robot_cells, robot_cells)
-        t1 = time.perf_counter()
-        expected = reachable_frontier_cells(values, robot_cells)
-        t2 = time.perf_counter()
-        if not np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected):
-            raise AssertionError(f"EWFD and the naive scan disagree at round {step}")
+        got, seconds = _both_detectors(detector, values, robot_cells, step)
         if step > 0:  # the first update is the full initial search
-            ewfd_s.append(t1 - t0)
-            naive_s.append(t2 - t1)
+            ewfd_s.append(seconds[0])
+            naive_s.append(seconds[1])
     figures = [
         Figure(
             "exploration",
@@ -333,15 +342,9 @@ def bench_frontiers_large(quick: bool) -> list[Figure]:
             _reveal(
                 values, truth, spec, pose, sensor.scan(k, float(step), tuple(pose), no_discs, -1)
             )
-        t0 = time.perf_counter()
-        got = detector.update(values, robot_cells, robot_cells)
-        t1 = time.perf_counter()
-        expected = reachable_frontier_cells(values, robot_cells)
-        t2 = time.perf_counter()
-        if not np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected):
-            raise AssertionError(f"EWFD and the naive scan disagree at round {step}")
-        ewfd_s.append(t1 - t0)
-        naive_s.append(t2 - t1)
+        got, seconds = _both_detectors(detector, values, robot_cells, step)
+        ewfd_s.append(seconds[0])
+        naive_s.append(seconds[1])
     return [
         Figure(
             "exploration",
