@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,7 @@ METRIC_KEYS = {
     "localization",
     "coverage",
     "mapping",
+    "waste",
     "safety",
     "server_cycle_ms",
     "provenance",
@@ -41,6 +43,7 @@ TABLE_TITLES = (
     "Coverage per robot combination (Table 5.3)",
     "Explored area",
     "Mapping accuracy (Table 5.4)",
+    "Distance and overlap",
     "Safety",
     "Server cycle time",
 )
@@ -63,6 +66,13 @@ def test_small_team_explores_thesis_exp1(tmp_path: Path, robots: int) -> None:
     assert metrics["coverage"]["+".join(names)]["rate"] == pytest.approx(1.0)
     saved = json.loads((tmp_path / "metrics.json").read_text())
     assert saved["completed"] is True
+    waste = metrics["waste"]
+    for name in names:  # the length of the written true path, summed here step by step
+        true_xy = np.loadtxt(tmp_path / "trajectories" / f"{name}.groundtruth.tum")[:, 1:3]
+        steps_m = [float(np.hypot(*(b - a))) for a, b in pairwise(true_xy)]
+        assert waste["travelled_m"][name] == pytest.approx(sum(steps_m), rel=1e-6)
+    assert waste["travelled_from"] == "ground truth"
+    assert (waste["overlap_ratio"] == 0.0) if robots == 1 else (0.0 < waste["overlap_ratio"] < 1.0)
     for path in (
         "config.yaml",
         "map.yaml",

@@ -37,3 +37,8 @@ def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rot = np.array([[c, -s], [s, c]])
     return points @ rot.T + pose[:2]
+
+
+def path_length_m(points_m: np.ndarray) -> float:
+    """Length in metres of a polyline of (N, 2) points."""
+    return float(np.linalg.norm(np.diff(np.asarray(points_m, dtype=float), axis=0), axis=1).sum())

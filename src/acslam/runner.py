@@ -324,6 +324,7 @@ def _metrics(
             **explored_areas(record.estimated_values != UNKNOWN, record.reachable, cell_area_m2),
         },
         "mapping": confusion_rates(record.true_occupied, record.estimated_values),
+        "waste": record.waste(names),
         "safety": {
             "obstacle_collisions": None if collisions is None else int(collisions[:, 0].sum()),
             "robot_collisions": None if collisions is None else int(collisions[:, 1].sum()),

@@ -36,6 +36,7 @@ METRIC_KEYS = {
     "localization",
     "coverage",
     "mapping",
+    "waste",
     "safety",
     "server_cycle_ms",
     "provenance",

@@ -14,6 +14,7 @@ from acslam.eval.metrics import (
     explored_areas,
     localization_errors,
     timing,
+    waste,
 )
 
 
@@ -82,6 +83,25 @@ def test_coverage_of_combinations() -> None:
     assert cov["robot_0+robot_1"] == {"area_m2": 1.0, "rate": 0.8}
     assert cov["robot_1+robot_2"]["area_m2"] == 0.75
     assert cov["robot_0+robot_1+robot_2"] == {"area_m2": 1.25, "rate": 1.0}
+
+
+def test_waste_is_overlap_over_the_union_and_path_lengths() -> None:
+    a = np.array([1, 1, 1, 0, 0, 0], dtype=bool)
+    b = np.array([0, 0, 1, 1, 0, 0], dtype=bool)
+    c = np.array([0, 0, 1, 0, 0, 1], dtype=bool)
+    paths = {
+        "robot_0": np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 4.0]]),  # 3 + 4 m
+        "robot_1": np.array([[1.0, 1.0], [4.0, 5.0]]),  # a 3-4-5 triangle's hypotenuse
+        "robot_2": np.array([[2.0, 2.0]]),  # never moved
+    }
+    spent = waste({"robot_0": a, "robot_1": b, "robot_2": c}, paths, 0.25, "ground truth")
+    # Cell 2 is in three masks; 5 cells are in any: 1 of 5 overlaps.
+    assert spent["overlap_area_m2"] == 0.25
+    assert spent["overlap_ratio"] == pytest.approx(0.2)
+    assert spent["travelled_m"] == {"robot_0": 7.0, "robot_1": 5.0, "robot_2": 0.0}
+    assert spent["travelled_total_m"] == 12.0
+    alone = waste({"robot_0": a}, {"robot_0": paths["robot_0"]}, 0.25, "estimate")
+    assert (alone["overlap_ratio"], alone["travelled_from"]) == (0.0, "estimate")
 
 
 def test_timing_gap() -> None:

@@ -119,7 +119,7 @@ def test_every_figure_has_a_numbered_caption(short_run) -> None:
 
 def test_every_numeric_table_column_states_its_unit(short_run) -> None:
     tables = parse_report(short_run.folder).tables
-    assert len(tables) == 7
+    assert len(tables) == 8
     checked = 0
     for table in tables:
         header, rows = table["header"], table["rows"]
@@ -199,3 +199,5 @@ def test_console_summary_and_piped_progress_have_units(short_run) -> None:
     for column in ("time [s]", "RMSE [m]", "final error [m]", "yaw RMSE [rad]", "area [m²]"):
         assert column in header
     assert "m² of reachable free area" in short_run.stdout
+    waste = json.loads((short_run.folder / "metrics.json").read_text())["waste"]
+    assert f"the robots drove {waste['travelled_total_m']:.1f} m (robot_0 " in short_run.stdout

@@ -24,6 +24,7 @@ def fake_metrics(
     stuck: int = 0,
     rmse_m: float = 0.1,
     cycle_ms: float = 20.0,
+    overlap_ratio: float = 0.1,
 ) -> dict:
     names = [f"robot_{i}" for i in range(robots)]
     per_robot = {name: total_s - 2.0 * i for i, name in enumerate(names)}
@@ -50,6 +51,11 @@ def fake_metrics(
         "localization": {name: {**loc, "rmse_m": rmse_m} for name in names},
         "coverage": {**coverage, "explored_fraction_of_reachable": 0.99},
         "mapping": {"accuracy": 0.95, "tpr": 0.9, "tnr": 0.96, "fpr": 0.04, "fnr": 0.1},
+        "waste": {
+            "overlap_ratio": overlap_ratio,
+            "travelled_m": {name: 0.2 * t for name, t in per_robot.items()},
+            "travelled_total_m": 0.2 * sum(per_robot.values()),
+        },
         "safety": {
             "obstacle_collisions": 0,
             "robot_collisions": 0,
@@ -108,7 +114,11 @@ def sweep_dir(tmp_path: Path) -> Path:
             ((*team, 2), fake_metrics(2, 600.0, completed=False, stuck=8), None),
             (("thesis-exp1", 3, "fgp", "factor-graph", 0), None, "worker process died (boom)"),
             (("thesis-exp2", 3, "fgp", "factor-graph", 0), fake_metrics(3, 50.0, stuck=1), None),
-            (("thesis-exp2", 3, "fgp", "greedy", 0), fake_metrics(3, 70.0, stuck=4), None),
+            (
+                ("thesis-exp2", 3, "fgp", "greedy", 0),
+                fake_metrics(3, 70.0, stuck=4, overlap_ratio=0.3),
+                None,
+            ),
             (
                 ("dungeon-40", 1, "fgp", "factor-graph", 0),
                 fake_metrics(1, 400.0, cycle_ms=10),
@@ -162,6 +172,12 @@ def test_thesis_tables_aggregate_over_seeds(sweep_dir: Path) -> None:
         text, "Experiment 1: mapping accuracy, confusion-based rates (thesis Table 5.4)", "Accuracy"
     )
     assert accuracy[1:] == ["95.0 ± 0.0", "95.0 ± 0.0", "—"]
+    waste = "Experiment 1: distance travelled and overlap (not reported by the thesis)"
+    # One robot drove 0.2 m per second of its time: 30, 32 and 34 m over the seeds.
+    assert table_row(text, waste, "1.1")[1:4] == ["robot_0 (robot_13)", "32.0 ± 2.0", ""]
+    # The team's row takes every run, the timed-out one too: 2-robot totals 31.6, 35.6 and 239.6 m.
+    team = [row for row in text.split(f"### {waste}")[1].splitlines() if "| 1.2 | team |" in row]
+    assert team[0].split("|")[3:5] == [" 102.3 ± 119.0 ", " 10.0 ± 0.0 "]
     assert "worker process died (boom)" in html_path.read_text()
 
 
@@ -171,7 +187,9 @@ def test_comparison_scaling_and_every_run_listed(sweep_dir: Path) -> None:
     rows = [line for line in comparison.splitlines() if line.startswith("| thesis-exp2")]
     assert [r.split("|")[4].strip() for r in rows] == ["factor-graph", "greedy"]
     assert [r.split("|")[6].strip() for r in rows] == ["50.0", "70.0"]
-    assert [r.split("|")[8].strip() for r in rows] == ["1.0", "4.0"]
+    assert [r.split("|")[8].strip() for r in rows] == ["10.0", "30.0"]  # overlap ratio [%]
+    assert [r.split("|")[9].strip() for r in rows] == ["28.8", "40.8"]  # 0.2 m/s of 144, 204 s
+    assert [r.split("|")[10].strip() for r in rows] == ["1.0", "4.0"]
     scaling = text.split("### Exploration time, server cycle", 1)[1].split("###", 1)[0]
     eight = [line for line in scaling.splitlines() if line.startswith("| dungeon-40 | 8 |")]
     assert "0/1 (1 no output yet)" in eight[0]

@@ -11,12 +11,12 @@ from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
 from acslam.errors import AcslamError, NoPathError
+from acslam.geometry import path_length_m
 from acslam.grid import GridSpec
 from acslam.planning.astar import (
     astar_cells,
     lookahead_point,
     path_costs_to,
-    path_length_m,
     plan_path,
     remaining_length_m,
     shortcut_cells,

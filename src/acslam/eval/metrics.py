@@ -12,7 +12,7 @@ from itertools import combinations
 
 import numpy as np
 
-from acslam.geometry import wrap_angles
+from acslam.geometry import path_length_m, wrap_angles
 from acslam.grid import OCCUPIED, UNKNOWN
 
 
@@ -150,6 +150,35 @@ def coverage_by_combination(
                 "rate": cells / team_area if team_area else 0.0,
             }
     return result
+
+
+def waste(
+    explored: Mapping[str, np.ndarray],
+    paths_xy_m: Mapping[str, np.ndarray],
+    cell_area_m2: float,
+    paths_from: str,
+) -> dict[str, object]:
+    """What exploring cost beyond the map it made: area seen by more than one robot and
+    the distance each robot drove.
+
+    ``explored`` maps a robot name to the mask of cells its own scans made known (as in
+    :func:`coverage_by_combination`); the overlap ratio is the area in two or more masks
+    over the area in any (0 for one robot). ``paths_xy_m`` maps the same names to (T, 2)
+    positions in order; a robot's distance is the length of that polyline.
+    ``paths_from`` says whose positions they are (ground truth, or the estimate where a
+    real team has none: keyframes only, so shorter than driven).
+    """
+    seen_by = np.sum([np.asarray(mask, dtype=bool) for mask in explored.values()], axis=0)
+    seen_cells = int(np.count_nonzero(seen_by))
+    overlap_cells = int(np.count_nonzero(seen_by >= 2))
+    travelled_m = {name: path_length_m(xy) for name, xy in paths_xy_m.items()}
+    return {
+        "overlap_area_m2": overlap_cells * cell_area_m2,
+        "overlap_ratio": overlap_cells / seen_cells if seen_cells else 0.0,
+        "travelled_m": travelled_m,
+        "travelled_total_m": float(sum(travelled_m.values())),
+        "travelled_from": paths_from,
+    }
 
 
 def exploration_times(

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from acslam.config import validated
 from acslam.errors import DataError
 from acslam.eval.figures import robot_colour
-from acslam.eval.metrics import explored_areas
+from acslam.eval.metrics import explored_areas, waste
 from acslam.eval.plotting import plt, save_figure
 from acslam.files import atomic_path, read_json, write_text
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
@@ -114,6 +114,19 @@ class RunRecord:
             return record
         except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
             raise DataError(path, f"not a run record ({exc})") from None
+
+    def waste(self, names: list[str]) -> dict[str, object]:
+        """Overlap and distance travelled (:func:`acslam.eval.metrics.waste`) of the robots
+        ``names`` (in robot order): along the true paths, or the estimated ones where a
+        real team has no truth."""
+        has_truth = all(len(true) for true in self.true_trajectories)
+        driven = self.true_trajectories if has_truth else self.estimated_trajectories
+        return waste(
+            dict(zip(names, self.robot_known, strict=True)),
+            {name: path[:, 1:3] for name, path in zip(names, driven, strict=True)},
+            self.spec.resolution_m**2,
+            "ground truth" if has_truth else "estimate",
+        )
 
 
 # --------------------------------------------------------------------------- figures
@@ -589,6 +602,24 @@ def _mapping_table(metrics: dict) -> str:
     return table + _note(note)
 
 
+def _waste_table(metrics: dict, record: RunRecord) -> str:
+    """Distance per robot and the area more than one robot mapped: what the team spent
+    beyond the map (recomputed from the record, so older run folders show it too)."""
+    spent = record.waste(list(metrics["timing"]["per_robot_s"]))
+    rows: list[list[object]] = [[name, m, ""] for name, m in spent["travelled_m"].items()]
+    rows.append(["team", spent["travelled_total_m"], spent["overlap_area_m2"]])
+    table = _table(
+        ["robot", "distance travelled [m]", "mapped by more than one robot [m²]"], rows, [0, 1, 1]
+    )
+    estimated = spent["travelled_from"] == "estimate"
+    return table + _note(
+        f"Overlap ratio: {100 * spent['overlap_ratio']:.1f} % of the area the robots' own "
+        f"scans mapped was mapped by more than one of them. Distances along the "
+        f"{spent['travelled_from']} paths"
+        + (" (keyframes only, so shorter than driven)." if estimated else ".")
+    )
+
+
 SAFETY_NAMES = {
     "obstacle_collisions": "collisions with walls [count]",
     "robot_collisions": "collisions between robots [count]",
@@ -643,6 +674,7 @@ def report_tables(metrics: dict, record: RunRecord) -> dict[str, str]:
         "Coverage per robot combination (Table 5.3)": _coverage_table(metrics),
         "Explored area": _explored_table(metrics, record),
         "Mapping accuracy (Table 5.4)": _mapping_table(metrics),
+        "Distance and overlap": _waste_table(metrics, record),
         "Safety": _safety_table(metrics),
         "Server cycle time": _cycle_table(metrics["server_cycle_ms"]),
     }

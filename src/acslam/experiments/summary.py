@@ -330,6 +330,31 @@ MAPPING_ROWS = (
 )
 
 
+def waste_table(title: str, teams: dict[object, list[RunOutcome]]) -> Table:
+    """What exploring spent beyond the map: distance per robot and the overlap ratio."""
+    rows = []
+    for label, runs in teams.items():
+        robots = max(r.spec["robots"] for r in runs)
+        for i in range(robots):
+            name = f"robot_{i}"
+            rows.append(
+                [str(label), _robot_label(name),
+                 fmt(cell_stat(runs, _get("waste", "travelled_m", name)), 1), ""]
+            )  # fmt: skip
+        rows.append(
+            [str(label), "team",
+             fmt(cell_stat(runs, _get("waste", "travelled_total_m")), 1),
+             fmt(cell_stat(runs, _get("waste", "overlap_ratio")), 1, 100)]
+        )  # fmt: skip
+    return Table(
+        title,
+        ["run", "robot", "distance travelled [m]", "overlap ratio [%]"],
+        rows,
+        "Overlap ratio: area mapped by more than one robot's own scans over the area mapped "
+        "by any. Distances along the true paths. Every run, completed or not.",
+    )
+
+
 def mapping_table(title: str, teams: dict[object, list[RunOutcome]]) -> Table:
     """Thesis Table 5.4 layout: confusion rates of the final map, one column per run."""
     rows = [
@@ -364,6 +389,11 @@ def thesis_sections(cells: dict[Cell, list[RunOutcome]]) -> list[Section]:
                         labelled,
                     ),
                     coverage_table(experiment, teams),
+                    waste_table(
+                        f"Experiment {experiment}: distance travelled and overlap "
+                        "(not reported by the thesis)",
+                        labelled,
+                    ),
                     mapping_table(
                         f"Experiment {experiment}: mapping accuracy, confusion-based rates "
                         f"(thesis Table 5.{first + 3 if experiment < 5 else 18})",
@@ -414,6 +444,8 @@ COMPARISON_COLUMNS = [
     "completed",
     "exploration time [s]",
     "explored [%]",
+    "overlap ratio [%]",
+    "team distance [m]",
     "stuck events",
     "min separation [m]",
     "wall collisions",
@@ -431,6 +463,8 @@ def _comparison_row(cell: Cell, runs: list[RunOutcome]) -> list[str]:
         completion(runs),
         fmt(cell_stat(runs, _get("timing", "total_s"), True)),
         fmt(cell_stat(runs, _get("coverage", "explored_fraction_of_reachable")), 1, 100),
+        fmt(cell_stat(runs, _get("waste", "overlap_ratio")), 1, 100),
+        fmt(cell_stat(runs, _get("waste", "travelled_total_m")), 1),
         fmt(cell_stat(runs, _get("safety", "stuck_events"))),
         fmt(cell_stat(runs, _get("safety", "min_robot_distance_m")), 2),
         fmt(cell_stat(runs, _get("safety", "obstacle_collisions"))),
@@ -498,6 +532,8 @@ def scaling_sections(cells: dict[Cell, list[RunOutcome]]) -> list[Section]:
                 fmt(total),
                 _speedup(base, total),
                 fmt(cell_stat(runs, _get("coverage", "explored_fraction_of_reachable")), 1, 100),
+                fmt(cell_stat(runs, _get("waste", "overlap_ratio")), 1, 100),
+                fmt(cell_stat(runs, _get("waste", "travelled_total_m")), 1),
                 fmt(cell_stat(runs, _get("server_cycle_ms", "mean")), 1),
                 fmt(cell_stat(runs, _get("server_cycle_ms", "p95")), 1),
                 fmt(cell_stat(runs, _get("real_time_factor")), 2),
@@ -527,6 +563,8 @@ def scaling_sections(cells: dict[Cell, list[RunOutcome]]) -> list[Section]:
                         "exploration time [s]",
                         "speed-up over smallest team",
                         "explored [%]",
+                        "overlap ratio [%]",
+                        "team distance [m]",
                         "cycle mean [ms]",
                         "cycle p95 [ms]",
                         "real-time factor",

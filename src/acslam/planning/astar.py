@@ -26,6 +26,7 @@ import numba
 import numpy as np
 
 from acslam.errors import NoPathError
+from acslam.geometry import path_length_m
 from acslam.grid import NEIGHBOUR_COLS, NEIGHBOUR_ROWS, GridSpec
 from acslam.pipeline.stages import Grid, Xy, Xys
 from acslam.planning.params import AstarParams
@@ -396,11 +397,6 @@ class AstarPlanner:
             cost_weight=p.cost_weight, max_snap_m=p.max_snap_m, shortcut=p.shortcut,
         )  # fmt: skip
         return path.points_m
-
-
-def path_length_m(points_m: np.ndarray) -> float:
-    """Length in metres of a polyline of (N, 2) points."""
-    return float(np.linalg.norm(np.diff(points_m, axis=0), axis=1).sum())
 
 
 def _projection(points_m: np.ndarray, robot_xy_m: np.ndarray) -> tuple[float, float, np.ndarray]:
