@@ -25,8 +25,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from acslam import stop
-from acslam.errors import AcslamError, AcslamWarning
-from acslam.files import output_folder
+from acslam.errors import AcslamError, AcslamWarning, DataError
+from acslam.eval.relations import DEFAULT_MAX_GAP_S
+from acslam.files import output_folder, write_json
 from acslam.text import plural
 
 if TYPE_CHECKING:
@@ -859,6 +860,109 @@ def convert_carmen_command(log: Path, out: Path) -> None:
         f"{plural(written['odometry_samples'], 'odometry sample')}, "
         f"{written['duration_s']:.0f} s -> {out}"
     )
+
+
+@cli.group("eval", short_help="Score a trajectory against reference relations.")
+def eval_group() -> None:
+    """Score trajectories the way published SLAM results are scored."""
+
+
+@eval_group.command("relations", short_help="Relative pose error on Freiburg relations.")
+@click.argument("trajectory", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("relations", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--max-gap-s",
+    type=click.FloatRange(min=0.0),
+    default=DEFAULT_MAX_GAP_S,
+    show_default=True,
+    help="How far an estimated pose's stamp may lie from a relation's time.",
+)
+@click.option(
+    "--json",
+    "json_out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the figures to this JSON file.",
+)
+def eval_relations_command(
+    trajectory: Path, relations: Path, max_gap_s: float, json_out: Path | None
+) -> None:
+    """Score TRAJECTORY (TUM) on RELATIONS (Freiburg: `t1 t2 x y z roll pitch yaw`, the
+    pose at t2 in t1's frame), the metric of Kümmerle et al. 2009 that Cartographer's
+    Table II reports: mean and std of the translational (m) and rotational (deg) error,
+    and the share of relations whose times the trajectory covers."""
+    from acslam.eval.relations import read_relations, relation_errors
+    from acslam.trajectory import read_tum
+
+    stamps_s, poses = read_tum(trajectory)
+    try:
+        scores = relation_errors(stamps_s, poses, read_relations(relations), max_gap_s)
+    except ValueError as exc:
+        raise DataError(trajectory, str(exc)) from None
+    if json_out is not None:
+        write_json(json_out, scores)
+    click.echo(
+        f"translation {scores['translation_mean_m']:.4f} ± {scores['translation_std_m']:.4f} m, "
+        f"rotation {scores['rotation_mean_deg']:.3f} ± {scores['rotation_std_deg']:.3f} deg "
+        f"over {scores['matched']} of {plural(scores['relations'], 'relation')} "
+        f"({100 * scores['matched_fraction']:.1f} % matched)"
+    )
+
+
+@eval_group.command("truth-relations", short_help="Write relations from a true trajectory.")
+@click.argument("truth", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("out", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--every-s", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True,
+    help="Sample the truth this often; each sample is related to the next.",
+)  # fmt: skip
+@click.option(
+    "--revisit-radius-m", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+    help="Also relate each sample to every earlier one this close ...",
+)  # fmt: skip
+@click.option(
+    "--min-loop-m", type=click.FloatRange(min=0.0), default=5.0, show_default=True,
+    help="... that the robot left by at least this much path before it came back.",
+)  # fmt: skip
+@click.option(
+    "--at",
+    "at_trajectory",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Relate the truth at this trajectory's stamps (a run's keyframes, "
+    "`trajectories/*.estimated.tum`), interpolated, instead of at its own.",
+)
+def truth_relations_command(
+    truth: Path,
+    out: Path,
+    every_s: float,
+    revisit_radius_m: float,
+    min_loop_m: float,
+    at_trajectory: Path | None,
+) -> None:
+    """Write OUT, a Freiburg relations file, from TRUTH (TUM), the ground truth of a
+    simulated run (`trajectories/*.groundtruth.tum`), to score it with `acslam eval
+    relations` like a real log."""
+    import numpy as np
+
+    from acslam.eval.metrics import interpolate_poses
+    from acslam.eval.relations import relations_from_truth, write_relations
+    from acslam.trajectory import read_tum
+
+    stamps_s, poses = read_tum(truth)
+    if at_trajectory is not None:
+        at_s = read_tum(at_trajectory)[0]
+        poses = interpolate_poses(at_s, stamps_s, poses)
+        covered = ~np.isnan(poses).any(axis=1)
+        if not covered.any():
+            raise DataError(at_trajectory, f"no stamp lies within the time of {truth}")
+        stamps_s, poses = at_s[covered], poses[covered]
+    try:
+        made = relations_from_truth(stamps_s, poses, every_s, revisit_radius_m, min_loop_m)
+    except ValueError as exc:
+        raise DataError(truth, str(exc)) from None
+    write_relations(out, made)
+    click.echo(f"{plural(len(made), 'relation')} -> {out}")
 
 
 @cli.group("experiments", short_help="Sweep grids of runs; summarize them like thesis chapter 5.")
