@@ -194,6 +194,11 @@ def _thesis_cells(
     }
 
 
+def _robot_names(runs: list[RunOutcome]) -> list[str]:
+    """Every robot of a cell's largest team, in order."""
+    return [f"robot_{i}" for i in range(max(r.spec["robots"] for r in runs))]
+
+
 def _robot_label(name: str) -> str:
     thesis = THESIS_NAME.get(name)
     return f"{name} ({thesis})" if thesis else name
@@ -265,9 +270,7 @@ def localization_table(title: str, teams: dict[object, list[RunOutcome]]) -> Tab
     """Thesis Table 5.2 layout: position and heading errors per robot."""
     rows = []
     for label, runs in teams.items():
-        robots = max(r.spec["robots"] for r in runs)
-        for i in range(robots):
-            name = f"robot_{i}"
+        for name in _robot_names(runs):
             rows.append(
                 [str(label), _robot_label(name)]
                 + [
@@ -334,13 +337,11 @@ def waste_table(title: str, teams: dict[object, list[RunOutcome]]) -> Table:
     """What exploring spent beyond the map: distance per robot and the overlap ratio."""
     rows = []
     for label, runs in teams.items():
-        robots = max(r.spec["robots"] for r in runs)
-        for i in range(robots):
-            name = f"robot_{i}"
-            rows.append(
-                [str(label), _robot_label(name),
-                 fmt(cell_stat(runs, _get("waste", "travelled_m", name)), 1), ""]
-            )  # fmt: skip
+        rows += [
+            [str(label), _robot_label(name),
+             fmt(cell_stat(runs, _get("waste", "travelled_m", name)), 1), ""]
+            for name in _robot_names(runs)
+        ]  # fmt: skip
         rows.append(
             [str(label), "team",
              fmt(cell_stat(runs, _get("waste", "travelled_total_m")), 1),
