@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
 from acslam.benchmarks import GROUPS, write_json
 from acslam.benchmarks.core import Figure
 from acslam.benchmarks.perception import bench_scan_matching
+from acslam.benchmarks.planning import pyastar2d_expansions
 from acslam.cli import cli
 
 
@@ -48,9 +53,35 @@ def test_bench_quick_covers_every_group(tmp_path: Path) -> None:
         "EWFD frontier update (",
         "EWFD frontier update mid-exploration",
         "A*",
+        "cells expanded per second",
         "FGP joint solve, 8 robots",
         "iSAM2",
     )
     for expected in expected_names:
         assert expected in names
     assert all(f["reference_value"] > 0 for f in figures)
+
+
+def testpyastar2d_expansions_finds_the_shortest_path_of_its_graph() -> None:
+    """The replica counting pyastar2d's expansions searches pyastar2d's graph: entering a
+    cell costs its weight, diagonal or not, corners cut. Its goal cost must equal scipy's
+    Dijkstra on that graph, built here edge by edge."""
+    rng = np.random.default_rng(3)
+    rows, cols = 30, 40
+    weights = (1.0 + 4.0 * rng.random((rows, cols))).astype(np.float32)
+    weights[rng.random((rows, cols)) < 0.2] = np.inf
+    weights[0, 0] = weights[rows - 1, cols - 1] = 1.0
+    edges = {}
+    for r in range(rows):
+        for c in range(cols):
+            for dr, dc in itertools.product((-1, 0, 1), repeat=2):
+                nr, nc = r + dr, c + dc
+                inside = 0 <= nr < rows and 0 <= nc < cols
+                if (dr, dc) != (0, 0) and inside and np.isfinite(weights[nr, nc]):
+                    edges[(r * cols + c, nr * cols + nc)] = float(weights[nr, nc])
+    (u, v), w = zip(*edges.keys(), strict=True), list(edges.values())
+    graph = csr_matrix((w, (u, v)), shape=(rows * cols, rows * cols))
+    exact = dijkstra(graph, indices=0)[rows * cols - 1]
+    expanded, cost = pyastar2d_expansions(weights, 0, rows * cols - 1)
+    assert cost == pytest.approx(exact, rel=1e-5)
+    assert 0 < expanded <= 9 * rows * cols  # each cell pushed at most once per neighbour

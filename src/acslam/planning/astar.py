@@ -110,12 +110,13 @@ def _search(
     goal_c: int,
     resolution_m: float,
     targets: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int]:
     """A* to the goal, or Dijkstra when ``goal_r < 0``: until every flat cell of
     ``targets`` is settled, or to every cell if ``targets`` is empty.
 
     Returns the cost-to-come (inf where unreached; final on settled cells, which include
-    the goal and the targets) and each cell's parent (flat index).
+    the goal and the targets), each cell's parent (flat index) and how many cells were
+    expanded (settled and their neighbours relaxed).
     """
     rows, cols = factor.shape
     factor_flat = factor.ravel()
@@ -139,11 +140,13 @@ def _search(
     goal = goal_r * cols + goal_c if use_heuristic else -1
     g[start] = 0.0
     heap, size = heap_push(heap, 0, 0.0, start)
+    expanded = 0
     while size > 0:
         _, node, size = heap_pop(heap, size)
         if closed[node]:
             continue
         closed[node] = True
+        expanded += 1
         if node == goal:
             break
         if stop_at_targets and is_target[node]:
@@ -177,7 +180,7 @@ def _search(
                     ac = abs(nc - goal_c)
                     h = resolution_m * (max(ar, ac) + 0.41421356237309515 * min(ar, ac))
                 heap, size = heap_push(heap, size, new_g + h, nxt)
-    return g, parent
+    return g, parent, expanded
 
 
 @numba.njit(cache=True)
@@ -208,6 +211,31 @@ def _check_cell(name: str, cell: tuple[int, int], lethal: np.ndarray) -> tuple[i
     return r, c
 
 
+def _checked_search(
+    cost: np.ndarray,
+    lethal: np.ndarray,
+    start_cell: tuple[int, int],
+    goal_cell: tuple[int, int],
+    resolution_m: float,
+    cost_weight: float,
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A* between two cells checked to be on the grid and free: (cost-to-come, parents,
+    cells expanded, the goal's flat index)."""
+    lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
+    sr, sc = _check_cell("start", start_cell, lethal)
+    gr, gc = _check_cell("goal", goal_cell, lethal)
+    if lethal[sr, sc] or lethal[gr, gc]:
+        which = "start" if lethal[sr, sc] else "goal"
+        raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): {which} is lethal")
+    g, parent, expanded = _search(
+        step_factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
+    )
+    goal = gr * lethal.shape[1] + gc
+    if not np.isfinite(g[goal]):
+        raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): goal unreachable")
+    return g, parent, expanded, goal
+
+
 def astar_cells(
     cost: np.ndarray,
     lethal: np.ndarray,
@@ -217,19 +245,23 @@ def astar_cells(
     cost_weight: float,
 ) -> tuple[np.ndarray, float]:
     """Optimal 8-connected path between two free cells: ((N, 2) ``[row, col]``, cost)."""
-    lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
-    sr, sc = _check_cell("start", start_cell, lethal)
-    gr, gc = _check_cell("goal", goal_cell, lethal)
-    if lethal[sr, sc] or lethal[gr, gc]:
-        which = "start" if lethal[sr, sc] else "goal"
-        raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): {which} is lethal")
-    g, parent = _search(
-        step_factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
+    g, parent, _, goal = _checked_search(
+        cost, lethal, start_cell, goal_cell, resolution_m, cost_weight
     )
-    goal = gr * lethal.shape[1] + gc
-    if not np.isfinite(g[goal]):
-        raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): goal unreachable")
-    return _trace(parent, goal, lethal.shape[1]), float(g[goal])
+    return _trace(parent, goal, np.shape(lethal)[1]), float(g[goal])
+
+
+def astar_expansions(
+    cost: np.ndarray,
+    lethal: np.ndarray,
+    start_cell: tuple[int, int],
+    goal_cell: tuple[int, int],
+    resolution_m: float,
+    cost_weight: float,
+) -> int:
+    """How many cells :func:`astar_cells` expands on this query: what a search costs
+    independently of the machine, to compare planners whose graphs differ."""
+    return _checked_search(cost, lethal, start_cell, goal_cell, resolution_m, cost_weight)[2]
 
 
 def path_costs_to(
@@ -252,7 +284,7 @@ def path_costs_to(
     if lethal[sr, sc] or len(targets) == 0:
         return np.full(len(targets), np.inf)
     flat = targets[:, 0] * lethal.shape[1] + targets[:, 1]
-    g, _ = _search(step_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
+    g, _, _ = _search(step_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
     return g[flat]
 
 
