@@ -388,6 +388,14 @@ def map_command(
     "live viewer].",
 )
 @click.option(
+    "--patrol-s",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="Once explored, drive loops through the map for this long before the run ends: "
+    "metrics.json's `patrol` compares each stage's p95 between the loops' first and last "
+    "tenth [default: the scenario's algorithms.server.patrol_s, 0].",
+)
+@click.option(
     "--record",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
@@ -413,6 +421,7 @@ def run_command(
     domain_id: int,
     viz: str,
     viz_out: Path | None,
+    patrol_s: float | None,
     record: Path | None,
 ) -> None:
     """Explore a scenario with the full server in the loop and write the run folder."""
@@ -433,6 +442,8 @@ def run_command(
         raise click.UsageError("--record: the bag is written as an .mcap file")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     scenario = scenario.with_algorithms(local_planner=planner, allocator=allocator)
+    if patrol_s is not None:
+        scenario = scenario.with_patrol(patrol_s)
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"

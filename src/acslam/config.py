@@ -413,6 +413,12 @@ class ServerConfig(Section):
     window_margin_m: PositiveFloat = 1.0
     # Exploration is over when no robot has had a reachable frontier for this long.
     finish_after_idle_s: NonNegativeFloat = 4.0
+    # After exploring, drive loops through the map for this long before the run ends
+    # (0: end at once): the trajectory grows while the map does not, which shows whether
+    # a cycle's cost follows the trajectory's length (acslam.exploration.patrol).
+    patrol_s: NonNegativeFloat = 0.0
+    # The patrol's waypoints cover the free space to within this distance.
+    patrol_spacing_m: PositiveFloat = 4.0
 
 
 class ScanMatchingConfig(Section):

@@ -182,10 +182,14 @@ class RunLog:
         default_factory=lambda: defaultdict(list)
     )
     explored_history: list[tuple[float, float]] = field(default_factory=list)
+    at_explored: Snapshot | None = None
+    """The snapshot of the step the team had nothing left to explore (before a patrol)."""
     _next_sample_s: float = 0.0
 
     def record(self, snapshot: Snapshot) -> None:
         self.last = snapshot
+        if self.at_explored is None and snapshot.explored_s is not None:
+            self.at_explored = snapshot
         for stage, seconds in snapshot.timings_s.items():
             self.timings_s[stage].append((snapshot.time_s, seconds))
 
@@ -282,7 +286,14 @@ def _metrics(
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
     last = log.last
-    done_s = exploration_times(reason == "explored", last.idle_since_s, last.lost, time_s)
+    # A patrol after exploring changes neither when each robot was done nor the verdict.
+    explored = log.at_explored or last
+    done_s = exploration_times(
+        reason == "explored" or log.at_explored is not None,
+        explored.idle_since_s,
+        explored.lost,
+        time_s,
+    )
     localization = {}
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
@@ -336,7 +347,37 @@ def _metrics(
             "control_period_ms": 1000 * algorithms.planning.control_period_s,
             **{stage: _timing_statistics_ms(ms) for stage, ms in stages_ms.items()},
         },
+        **_patrol_metrics(algorithms.server.patrol_s, log.at_explored, record, time_s),
     }
+
+
+PHASE_SHARE = 0.1
+"""The patrol's cost is compared between its first and its last tenth."""
+
+
+def _patrol_metrics(
+    patrol_s: float, at_explored: Snapshot | None, record: RunRecord, end_s: float
+) -> dict:
+    """Whether a cycle gets dearer as the trajectory grows over a map that no longer does:
+    each stage's p95 over the first and the last tenth of the patrol, and their ratio.
+    Nothing when the scenario does not patrol or the run ended before exploring."""
+    if patrol_s <= 0 or at_explored is None or end_s <= at_explored.time_s:
+        return {}
+    start_s = at_explored.time_s
+    tenth_s = PHASE_SHARE * (end_s - start_s)
+    stages = {}
+    for stage, samples in zip(record.stage_names, record.stage_timings, strict=True):
+        first = samples[(samples[:, 0] >= start_s) & (samples[:, 0] < start_s + tenth_s), 1]
+        last = samples[samples[:, 0] >= end_s - tenth_s, 1]
+        if len(first) and len(last):
+            first_ms = 1000 * float(np.percentile(first, 95))
+            last_ms = 1000 * float(np.percentile(last, 95))
+            stages[str(stage)] = {
+                "first_tenth_p95_ms": first_ms,
+                "last_tenth_p95_ms": last_ms,
+                "growth": last_ms / first_ms if first_ms > 0 else None,
+            }
+    return {"patrol": {"start_s": start_s, "end_s": end_s, "stages": stages}}
 
 
 def _common_clock_xy(trajectories: list[np.ndarray]) -> np.ndarray:

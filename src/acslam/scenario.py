@@ -63,6 +63,15 @@ class Scenario:
         config = self.config.model_copy(update={"algorithms": algorithms})
         return Scenario(config, self.source, self.world, self.starts, self.landmarks)
 
+    def with_patrol(self, patrol_s: float) -> Scenario:
+        """The same scenario, patrolling the explored map for ``patrol_s`` before the run
+        ends (:mod:`acslam.exploration.patrol`)."""
+        algorithms = self.config.algorithms
+        server = algorithms.server.model_copy(update={"patrol_s": patrol_s})
+        algorithms = algorithms.model_copy(update={"server": server})
+        config = self.config.model_copy(update={"algorithms": algorithms})
+        return Scenario(config, self.source, self.world, self.starts, self.landmarks)
+
 
 def _check_starts(starts: np.ndarray, world: World, radius_m: float, source: str, field: str):
     spec = world.spec

@@ -3,7 +3,9 @@
 Every control period: ingest robot messages -> localizer (SLAM) -> mapper (following pose
 corrections); at the map-update period: costmap -> frontier detector -> clusterer; at the
 replanning period, or when a robot reached or lost its goal: allocator -> global planner;
-then the local planner for the whole team -> velocity commands. Each stage is the plugin
+then the local planner for the whole team -> velocity commands. Once explored, the
+scenario may keep the robots driving loops through the map (``patrol_s``) instead of
+allocating frontiers. Each stage is the plugin
 the scenario names (:mod:`acslam.pipeline.registry`); what the step decided leaves the
 server only as a :class:`~acslam.pipeline.snapshot.Snapshot`.
 
@@ -27,7 +29,8 @@ import numpy as np
 from acslam.config import ScenarioConfig
 from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
-from acslam.grid import GridSpec, Window
+from acslam.exploration.patrol import Patrol
+from acslam.grid import FREE, GridSpec, Window
 from acslam.mapping.costmap import Costmap, compute_costmap, known_window
 from acslam.messages import RobotMessage, VelocityCommand
 from acslam.pipeline.perception import KeptScan, Perception
@@ -97,6 +100,8 @@ class Server:
         self._next_replan_s = 0.0
         self._replan_now = True
         self._finished = False
+        self._explored_s: float | None = None
+        self._patrol: Patrol | None = None
         self._lost: dict[int, float] = {}
 
     def mark_lost(self, robot_id: int, now_s: float) -> None:
@@ -145,6 +150,7 @@ class Server:
             stuck_events=tuple(t.recovery.count for t in self._tasks),
             lost=MappingProxyType(dict(self._lost)),
             finished=self._finished,
+            explored_s=self._explored_s,
             timings_s=MappingProxyType(self._timings_s),
         )
 
@@ -228,49 +234,84 @@ class Server:
     # ------------------------------------------------------------------ decisions
 
     def _allocate(self, poses: np.ndarray, now_s: float) -> None:
-        """Assign clusters and plan a global path to each; a robot with none goes idle."""
+        """Assign clusters and plan a global path to each; a robot with none goes idle.
+        Once explored, drive the patrol's tour instead, if the scenario asks for one."""
         costmap, window = self._costmap, self._window
         if costmap is None or window is None:
             return
+        active = [i for i in range(self._robot_count) if i not in self._lost]
+        if self._patrol is not None:
+            self._drive_patrol(active, poses, now_s)
+            return
         robot_cells = window.spec.world_to_cell(poses[:, :2])
         robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
-        active = [i for i in range(self._robot_count) if i not in self._lost]
         current = [self._matching_cluster(self._tasks[i]) for i in active]
         allocation = self._allocator.allocate(robot_cells[active], self._clusters, costmap, current)
         for k, i in enumerate(active):
             task = self._tasks[i]
             choice = allocation.cluster_of_robot[k]
-            path = None
-            if choice is not None:
-                try:
-                    path = self._global_planner.plan(
-                        task.recovery.penalize(costmap.cost, window.spec),
-                        costmap.lethal,
-                        window.spec,
-                        poses[i, :2],
-                        self._clusters[choice].target_m,
-                    )
-                except NoPathError:
-                    path = None
-            if path is None:
-                task.cluster, task.path_m = None, None
-                if task.idle_since_s is None:
-                    task.idle_since_s = now_s
-                continue
-            task.cluster = self._clusters[choice]
-            task.path_m = np.vstack([poses[i, :2], path])
-            task.recovery.replanned(
-                now_s, choice != current[k], remaining_length_m(task.path_m, poses[i, :2])
-            )
-            task.idle_since_s = None
+            target = None if choice is None else self._clusters[choice]
+            assigned = self._assign(i, target, poses[i, :2], now_s, choice != current[k])
+            if not assigned and task.idle_since_s is None:
+                task.idle_since_s = now_s
         # Done once every robot has had nothing to do for a while after the map has begun:
         # frontiers briefly vanish while a robot stands on the last one it was sent to.
         idle_since = [self._tasks[i].idle_since_s for i in active]
-        self._finished = (
+        explored = (
             len(self._mapper) > 0
             and all(s is not None for s in idle_since)
             and now_s - max(idle_since) >= self._config.algorithms.server.finish_after_idle_s
         )
+        if explored:
+            self._explored_s = now_s
+            server = self._config.algorithms.server
+            if server.patrol_s > 0 and self._values is not None:
+                # Waypoints in the open, a robot radius clear of the lethal band.
+                clear_m = 2 * self._config.robots.radius_m
+                free = (window.crop(self._values) == FREE) & (costmap.distance_m >= clear_m)
+                self._patrol = Patrol.over(
+                    free, window.spec, server.patrol_spacing_m, poses[active[0]], now_s,
+                    self._robot_count,
+                )  # fmt: skip
+            self._finished = self._patrol is None
+
+    def _assign(
+        self, robot: int, target: FrontierCluster | None, xy_m: np.ndarray, now_s: float,
+        changed: bool,
+    ) -> bool:  # fmt: skip
+        """Plan the robot's global path to ``target``; without a target or a path to it
+        the robot has neither. Returns whether it has one."""
+        costmap, window, task = self._costmap, self._window, self._tasks[robot]
+        assert costmap is not None and window is not None
+        path = None
+        if target is not None:
+            try:
+                path = self._global_planner.plan(
+                    task.recovery.penalize(costmap.cost, window.spec), costmap.lethal,
+                    window.spec, xy_m, target.target_m,
+                )  # fmt: skip
+            except NoPathError:
+                path = None
+        if path is None:
+            task.cluster, task.path_m = None, None
+            return False
+        task.cluster = target
+        task.path_m = np.vstack([xy_m, path])
+        task.recovery.replanned(now_s, changed, remaining_length_m(task.path_m, xy_m))
+        task.idle_since_s = None
+        return True
+
+    def _drive_patrol(self, active: list[int], poses: np.ndarray, now_s: float) -> None:
+        """Each robot on along the tour; finished when the patrol has lasted its time."""
+        assert self._patrol is not None
+        for i in active:
+            old = self._tasks[i].cluster
+            reached = old is not None and self._tasks[i].path_m is None
+            for waypoint in self._patrol.goals(i, reached):
+                changed = old is None or not np.array_equal(old.target_m, waypoint.target_m)
+                if self._assign(i, waypoint, poses[i, :2], now_s, changed):
+                    break
+        self._finished = now_s - self._patrol.started_s >= self._config.algorithms.server.patrol_s
 
     def _matching_cluster(self, task: RobotTask) -> int | None:
         """The current cluster that continues the robot's goal: its target is nearest the

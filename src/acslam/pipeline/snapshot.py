@@ -63,7 +63,9 @@ class Snapshot:
     (None while it has a goal), ``stuck_events``. ``lost``: robot -> time it was lost.
     ``costmap`` covers ``window`` of the map grid; ``frontier_cells`` are cells of the
     whole grid, ``clusters`` cells of the window. ``timings_s``: wall seconds of each
-    stage that ran in this step, and of the whole ``cycle``.
+    stage that ran in this step, and of the whole ``cycle``. ``explored_s``: when the team
+    had nothing left to explore (None before); ``finished`` follows it, or the end of the
+    patrol after it (``ServerConfig.patrol_s``).
     """
 
     time_s: float
@@ -82,4 +84,5 @@ class Snapshot:
     stuck_events: tuple[int, ...]
     lost: Mapping[int, float]
     finished: bool
+    explored_s: float | None
     timings_s: Mapping[str, float]
