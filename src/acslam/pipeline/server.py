@@ -5,9 +5,9 @@ corrections); at the map-update period: costmap -> frontier detector -> clustere
 replanning period, or when a robot reached or lost its goal: allocator -> global planner;
 then the local planner for the whole team -> velocity commands. Once explored, the
 scenario may keep the robots driving loops through the map (``patrol_s``) instead of
-allocating frontiers. Each stage is the plugin
-the scenario names (:mod:`acslam.pipeline.registry`); what the step decided leaves the
-server only as a :class:`~acslam.pipeline.snapshot.Snapshot`.
+allocating frontiers. Each stage is the plugin the scenario names
+(:mod:`acslam.pipeline.registry`); what the step decided leaves the server only as a
+:class:`~acslam.pipeline.snapshot.Snapshot`.
 
 The server sees only :mod:`acslam.messages` and the map's extent (a deployment parameter,
 like the thesis's fixed 40 m x 40 m grid); it never touches simulator ground truth. The
