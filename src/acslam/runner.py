@@ -286,7 +286,7 @@ def _metrics(
     count = scenario.robot_count
     names = [robot_name(i) for i in range(count)]
     last = log.last
-    # A patrol after exploring changes neither when each robot was done nor the verdict.
+    # A patrol after exploring does not change when each robot was done exploring.
     explored = log.at_explored or last
     done_s = exploration_times(
         reason == "explored" or log.at_explored is not None,
