@@ -54,7 +54,8 @@ def test_errors_of_a_hand_made_case(tmp_path: Path) -> None:
     assert (scores["relations"], scores["matched"]) == (4, 3)
     assert scores["matched_fraction"] == 0.75
     assert scores["translation_mean_m"] == pytest.approx(0.1 / 3)
-    assert scores["translation_std_m"] == pytest.approx(math.sqrt(0.01 / 3 - (0.1 / 3) ** 2))
+    # Sample std (n - 1) of 0, 0 and 0.1 m: sqrt((2 (0.1/3)^2 + (0.2/3)^2) / 2).
+    assert scores["translation_std_m"] == pytest.approx(math.sqrt(0.01 / 3))
     assert scores["translation_mean_square_m2"] == pytest.approx(0.01 / 3)
     assert scores["rotation_mean_deg"] == pytest.approx(2.0 / 3)
     assert scores["rotation_mean_square_deg2"] == pytest.approx(4.0 / 3)
@@ -66,6 +67,9 @@ def test_a_stamp_further_than_the_gap_is_not_matched(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"no relation.s times lie within 0\.01 s"):
         relation_errors(STAMPS_S + 0.02, TRUTH, read_relations(path))
     assert relation_errors(STAMPS_S + 0.02, TRUTH, read_relations(path), 0.05)["matched"] == 3
+    path.write_text(RELATIONS_TEXT.splitlines()[1] + "\n")
+    one = relation_errors(STAMPS_S, TRUTH, read_relations(path))
+    assert one["matched"] == 1 and math.isnan(one["translation_std_m"])  # no spread of one
 
 
 def two_laps() -> tuple[np.ndarray, np.ndarray]:
@@ -130,7 +134,7 @@ def test_cli_scores_and_writes_json(tmp_path: Path) -> None:
          "--json", str(tmp_path / "scores.json")],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    assert "translation 0.0333 ± 0.0471 m, rotation 0.667 ± 0.943 deg" in result.output
+    assert "translation 0.0333 ± 0.0577 m, rotation 0.667 ± 1.155 deg" in result.output
     assert "over 3 of 4 relations (75.0 % matched)" in result.output
     assert json.loads((tmp_path / "scores.json").read_text())["matched"] == 3
     late = CliRunner().invoke(

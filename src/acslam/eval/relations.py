@@ -128,6 +128,10 @@ def _nearest(stamps_s: np.ndarray, wanted_s: np.ndarray, max_gap_s: float) -> np
     return np.where(np.abs(stamps_s[pick] - wanted_s) <= max_gap_s, pick, -1)
 
 
+def _sample_std(values: np.ndarray) -> float:
+    return float(values.std(ddof=1)) if len(values) > 1 else math.nan
+
+
 def relation_errors(
     stamps_s: np.ndarray,
     poses: np.ndarray,
@@ -139,9 +143,12 @@ def relation_errors(
     Each relation's two times take the estimated poses nearest in time (within
     ``max_gap_s``); a relation whose times the trajectory does not cover is not matched,
     and the share matched is reported beside the errors. The error of relation ``k`` is
-    ``d_ref^-1 * d_est`` of the estimated and reference relative poses: its translation's
-    norm (m) and its angle's magnitude (deg). Means, (population) standard deviations and
-    mean squares over the matched relations, as the Freiburg evaluator gives them.
+    ``d_ref^-1 * d_est`` of the estimated and reference relative poses (``d_est ⊖ d_ref``
+    of Kümmerle et al.): its translation's norm (m) and its angle's magnitude (deg).
+    Cartographer's evaluator composes ``d_est * d_ref^-1`` instead, whose translation
+    differs by at most the relation's length times the angle error: the same figure to
+    first order. Means, sample standard deviations (n - 1, NaN for one relation, as
+    Cartographer's) and mean squares over the matched relations.
     """
     order = np.argsort(stamps_s, kind="stable")
     stamps_s, poses = np.asarray(stamps_s, float)[order], np.asarray(poses, float)[order]
@@ -167,9 +174,9 @@ def relation_errors(
         "matched": int(matched.sum()),
         "matched_fraction": float(matched.mean()),
         "translation_mean_m": float(translation_m.mean()),
-        "translation_std_m": float(translation_m.std()),
+        "translation_std_m": _sample_std(translation_m),
         "translation_mean_square_m2": float(np.mean(translation_m**2)),
         "rotation_mean_deg": float(rotation_deg.mean()),
-        "rotation_std_deg": float(rotation_deg.std()),
+        "rotation_std_deg": _sample_std(rotation_deg),
         "rotation_mean_square_deg2": float(np.mean(rotation_deg**2)),
     }
