@@ -219,5 +219,5 @@ def test_examples_load(path: Path) -> None:
     if not config.world.file.exists():
         pytest.skip(f"shared dataset not found: {config.world.file}")
     scenario = load_scenario(path)
-    assert scenario.robot_count == 3
+    assert scenario.robot_count == config.robots.count == len(scenario.starts)
     assert len(scenario.landmarks) > 0
