@@ -8,8 +8,8 @@ charged again at every later pose, unlike an absolute trajectory error. Cartogra
 (Hess et al. 2016, Table II) and the Freiburg evaluator report the mean and standard
 deviation of the translational (m) and rotational (deg) error over the relations.
 
-Relations are planar here: ``z``, ``roll`` and ``pitch`` must be 0, as they are in every
-published 2D relations file.
+Relations are planar here: ``z``, ``roll`` and ``pitch`` must be 0, as a 2D log's
+relations have them; a file that is not planar is refused rather than projected.
 """
 
 from __future__ import annotations
