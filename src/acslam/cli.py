@@ -472,7 +472,7 @@ def run_command(
             )  # fmt: skip
         else:
             metrics = run_exploration(scenario, out_dir, limit_s, hooks=hooks)
-    _print_summary(metrics)
+    print_run_summary(metrics)
     _console.print(
         f"run folder: {out_dir}  (report: {out_dir / 'report.html'})", markup=False, soft_wrap=True
     )
@@ -587,7 +587,7 @@ def _progress(name: str, limit_s: float) -> Iterator[Callable]:
     yield show_line
 
 
-def _print_summary(metrics: dict) -> None:
+def print_run_summary(metrics: dict) -> None:
     """The run's outcome and its main numbers, each with its unit."""
     status = "completed" if metrics["completed"] else f"NOT completed: {metrics['reason']}"
     _console.print(
@@ -637,6 +637,16 @@ def _print_summary(metrics: dict) -> None:
         markup=False,
         soft_wrap=True,
     )
+    patrol = metrics.get("patrol")
+    if patrol and "cycle" in patrol["stages"]:
+        cycle = patrol["stages"]["cycle"]
+        _console.print(
+            f"patrol from {patrol['start_s']:.0f} s to {patrol['end_s']:.0f} s: server cycle "
+            f"p95 {cycle['first_tenth_p95_ms']:.1f} ms over its first tenth, "
+            f"{cycle['last_tenth_p95_ms']:.1f} ms over its last ({cycle['growth']:.2f}x)",
+            markup=False,
+            soft_wrap=True,
+        )
 
 
 @cli.command("report", short_help="Rebuild a run's report.html and figures/ from its files.")
@@ -1235,7 +1245,7 @@ def serve_command(
             served = ServeOptions(heartbeat_timeout_s=heartbeat_timeout_s)
             click.echo(f"serving {plural(scenario.robot_count, 'robot')} on {listen} -> {out_dir}")
             metrics = serve(scenario, listen, out_dir, limit_s, options=served)
-    _print_summary(metrics)
+    print_run_summary(metrics)
     _exit_if_stopped(signals, out_dir)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
+from acslam.cli import print_run_summary
 from acslam.exploration.patrol import Patrol, patrol_waypoints
 from acslam.grid import GridSpec
 from acslam.runner import run_exploration
@@ -63,7 +64,9 @@ def test_robots_start_spread_over_the_tour_and_skip_what_they_cannot_reach() -> 
     assert len(list(patrol.goals(0, reached=False))) == 6
 
 
-def test_a_run_patrols_after_exploring_and_reports_start_and_end(tmp_path: Path) -> None:
+def test_a_run_patrols_after_exploring_and_reports_start_and_end(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     patrol_s = 20.0
     scenario = load_scenario("thesis-exp1", robots=3).with_patrol(patrol_s)
     metrics = run_exploration(scenario, tmp_path, max_time_s=400.0)
@@ -85,3 +88,9 @@ def test_a_run_patrols_after_exploring_and_reports_start_and_end(tmp_path: Path)
     assert metrics["safety"]["obstacle_collisions"] == 0
     assert "patrol" in json.loads((tmp_path / "metrics.json").read_text())
     assert "Server cycle over the patrol" in (tmp_path / "report.html").read_text()
+    print_run_summary(metrics)
+    cycle = patrol["stages"]["cycle"]
+    assert (
+        f"patrol from {patrol['start_s']:.0f} s to {metrics['sim_time_s']:.0f} s: server cycle "
+        f"p95 {cycle['first_tenth_p95_ms']:.1f} ms over its first tenth"
+    ) in capsys.readouterr().out
