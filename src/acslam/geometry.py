@@ -32,6 +32,15 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[2] - a[2])])
 
 
+def between_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`between` row by row of two (N, 3) pose arrays: each ``b[k]`` in the frame
+    of ``a[k]``."""
+    a, b = np.atleast_2d(a), np.atleast_2d(b)
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, wrap_angles(b[:, 2] - a[:, 2])])
+
+
 def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map (N, 2) points from the frame of ``pose`` to the world frame."""
     c, s = math.cos(pose[2]), math.sin(pose[2])

@@ -22,7 +22,7 @@ import numpy as np
 
 from acslam.errors import DataError
 from acslam.files import atomic_path
-from acslam.geometry import between, wrap_angles
+from acslam.geometry import between_rows
 
 DEFAULT_MAX_GAP_S = 0.01
 """How far an estimated pose's stamp may lie from a relation's: less than half the frame
@@ -114,8 +114,7 @@ def relations_from_truth(
     if not pairs:
         raise ValueError(f"a truth shorter than {every_s:g} s has no relations")
     first, second = np.array(pairs).T
-    relative = np.array([between(poses[i], poses[j]) for i, j in pairs])
-    return Relations(stamps_s[first], stamps_s[second], relative)
+    return Relations(stamps_s[first], stamps_s[second], between_rows(poses[first], poses[second]))
 
 
 def _nearest(stamps_s: np.ndarray, wanted_s: np.ndarray, max_gap_s: float) -> np.ndarray:
@@ -162,13 +161,10 @@ def relation_errors(
             f"no relation's times lie within {max_gap_s:g} s of the trajectory's stamps "
             f"({stamps_s[0]:.3f}-{stamps_s[-1]:.3f} s)"
         )
-    estimated = np.array(
-        [between(poses[i], poses[j]) for i, j in zip(first[matched], second[matched], strict=True)]
-    )
-    reference = relations.relative[matched]
-    errors = np.array([between(ref, est) for ref, est in zip(reference, estimated, strict=True)])
+    estimated = between_rows(poses[first[matched]], poses[second[matched]])
+    errors = between_rows(relations.relative[matched], estimated)
     translation_m = np.hypot(errors[:, 0], errors[:, 1])
-    rotation_deg = np.degrees(np.abs(wrap_angles(errors[:, 2])))
+    rotation_deg = np.degrees(np.abs(errors[:, 2]))  # between_rows wraps the angle
     return {
         "relations": len(relations),
         "matched": int(matched.sum()),
