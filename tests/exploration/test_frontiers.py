@@ -46,6 +46,37 @@ def test_naive_detector_on_a_hand_made_grid() -> None:
     assert reachable_free_mask(values, robot)[3].all()
 
 
+@pytest.mark.parametrize(
+    ("closed", "split"),
+    [
+        ([(3, 5), (3, 6)], True),  # two cells side by side: neither alone closes it
+        ([(3, 6)], True),  # one cell whose visited neighbours lie on both sides
+        ([(1, 2)], False),  # one cell in the open room: the ring goes round it
+        ([(1, 1), (1, 2)], False),  # two cells side by side in the open room
+    ],
+)
+def test_ewfd_splits_only_where_removed_cells_close_a_passage(closed, split) -> None:
+    """Two rooms joined by a one-cell-high passage two cells long; the room on the right
+    still holds unknown cells. Cells turning occupied split off that room (its frontier
+    becomes unreachable) exactly when they close the passage."""
+    values = np.full((7, 12), 100, dtype=np.int8)
+    values[1:6, 1:5] = 0
+    values[1:6, 7:11] = 0
+    values[3, 5:7] = 0
+    values[2:4, 9] = -1
+    robot = np.array([[3, 2]])
+    det = EwfdFrontierDetector(GridSpec(0.0, 0.0, 0.1, 7, 12), active_radius_m=0.4)
+    before = det.update(values, robot)
+    assert _as_set(before) == _as_set(reachable_frontier_cells(values, robot))
+    assert len(before) > 0
+    for cell in closed:
+        values[cell] = 100
+    got = det.update(values, robot, np.array(closed))
+    assert _as_set(got) == _as_set(reachable_frontier_cells(values, robot))
+    assert (len(got) == 0) == split
+    np.testing.assert_array_equal(det.visited_mask(), reachable_free_mask(values, robot))
+
+
 def test_ewfd_matches_oracle_on_random_grid_mutations() -> None:
     """Blobs of random cells rewritten near the scan cells: many splits, merges, removals."""
     rng = np.random.default_rng(7)

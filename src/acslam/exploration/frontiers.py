@@ -23,9 +23,10 @@ EWFD state (shared by all robots, the thesis's "shared frontier grid"):
 An update, for the changed cells of all active areas (thesis §4.5, with the corrections
 exactness needs; see the comments in :func:`_process`):
 
-1. visited cells that stopped being free are removed; the pieces of their component are
-   re-examined by a multi-source BFS from their visited neighbours that stops as soon as
-   all pieces met or all but one are exhausted (real splits);
+1. visited cells that stopped being free are removed; where a removed cell's visited
+   neighbours are not connected around it, the pieces of its component are re-examined
+   by a multi-source BFS from those neighbours that stops as soon as all pieces met or
+   all but one are exhausted (real splits);
 2. the wavefront expands from the previous wavefront: newly free cells next to visited
    cells (that is, next to previous frontier cells when they were unknown) seed a BFS
    that passes through newly explored free cells *and* through free cells that were free
@@ -60,7 +61,7 @@ from scipy import ndimage
 
 from acslam.config import MappingConfig
 from acslam.exploration.params import EwfdParams, NaiveFrontierParams
-from acslam.grid import FREE, UNKNOWN, GridSpec, neighbour_flat
+from acslam.grid import FREE, NEIGHBOUR_COLS, NEIGHBOUR_ROWS, UNKNOWN, GridSpec, neighbour_flat
 
 _EIGHT = np.ones((3, 3), dtype=bool)
 
@@ -191,6 +192,64 @@ def _diff(
 
 
 @numba.njit(cache=True)
+def _ring_groups(
+    visited: np.ndarray, row: int, col: int, rows: int, cols: int, firsts: np.ndarray
+) -> int:
+    """The groups of the visited 8-neighbours of (row, col) that are 8-connected among
+    themselves, inside the ring; writes one cell of each group to ``firsts`` and returns
+    how many there are.
+
+    A removed cell whose visited neighbours form one group, and none of whose neighbours
+    was removed too, cannot split its component: any path through it detours through
+    the ring, whose cells stay visited. (Two removed cells side by side can close a
+    passage that neither closes alone.)
+    """
+    group = np.full(8, -1, np.int64)
+    n_groups = 0
+    for k in range(8):
+        v = neighbour_flat(row, col, k, rows, cols)
+        if v < 0 or not visited[v]:
+            continue
+        own = -1
+        for j in range(k):
+            if group[j] < 0:
+                continue
+            if abs(NEIGHBOUR_ROWS[k] - NEIGHBOUR_ROWS[j]) > 1:
+                continue
+            if abs(NEIGHBOUR_COLS[k] - NEIGHBOUR_COLS[j]) > 1:
+                continue
+            if own < 0:
+                own = group[j]
+            elif group[j] != own:
+                # k joins two groups: relabel the other one as ``own``.
+                other = group[j]
+                for m in range(k):
+                    if group[m] == other:
+                        group[m] = own
+                n_groups -= 1
+        if own < 0:
+            own = k
+            n_groups += 1
+        group[k] = own
+    count = 0
+    for k in range(8):
+        if group[k] == k:
+            firsts[count] = neighbour_flat(row, col, k, rows, cols)
+            count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def _next_to_removed(mark: np.ndarray, row: int, col: int, rows: int, cols: int) -> bool:
+    """Whether an 8-neighbour of (row, col) is marked removed (-1) in ``mark``."""
+    for k in range(8):
+        v = neighbour_flat(row, col, k, rows, cols)
+        if v >= 0 and mark[v] == -1:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
 def _mark_dirty(flat: int, dirty: np.ndarray, dirty_flag: np.ndarray, n_dirty: int) -> int:
     if dirty_flag[flat] == 0:
         dirty_flag[flat] = 1
@@ -243,20 +302,36 @@ def _process(
     # piece of it is left: that piece keeps the original id. Cost: a few cells when the
     # pieces touch around the removed cell; when they only meet through a detour (a cell
     # of a thin wall seen free by a noisy beam, then occupied again) it is the area both
-    # sides cover until they meet, the dominant EWFD cost in benchmarks/exploration_speed.
+    # sides cover until they meet. Pieces of one component stop only once all of them
+    # met, so two removals far apart would grow until they meet across the component.
+    # Hence only the removals that can split seed pieces, one per group of visited
+    # neighbours: those whose neighbours fall into several groups within their ring, or
+    # that lie next to another removed cell (:func:`_ring_groups`; removed cells are
+    # marked -1 meanwhile). The others keep one neighbour as a candidate of step 4 (the
+    # robot's own cell may be the one removed).
     max_pieces = 8 * n_removed + 1
     lp = np.empty(max_pieces, np.int64)
     pending = np.zeros(max_pieces, np.int64)
     origin = np.empty(max_pieces, np.int64)
     split_id = np.zeros(max_pieces, np.int64)
     seed_cells = np.empty(max_pieces, np.int64)
+    unsplit_cells = np.empty(n_removed, np.int64)
+    n_unsplit = 0
+    firsts = np.empty(8, np.int64)
     n_pieces = 0
     tail = 0
     for i in range(n_removed):
+        mark[removed[i]] = -1
+    for i in range(n_removed):
         row, col = divmod(removed[i], cols)
-        for k in range(8):
-            v = neighbour_flat(row, col, k, rows, cols)
-            if v >= 0 and visited[v] and mark[v] == 0:
+        n_groups = _ring_groups(visited, row, col, rows, cols, firsts)
+        if n_groups == 1 and not _next_to_removed(mark, row, col, rows, cols):
+            unsplit_cells[n_unsplit] = firsts[0]
+            n_unsplit += 1
+            continue
+        for g in range(n_groups):
+            v = firsts[g]
+            if mark[v] == 0:
                 n_pieces += 1
                 lp[n_pieces] = n_pieces
                 pending[n_pieces] = 1
@@ -309,6 +384,8 @@ def _process(
         mark[v] = 0
     for p in range(1, n_pieces + 1):
         piece_active[origin[p]] = 0
+    for i in range(n_removed):
+        mark[removed[i]] = 0
 
     # 3. Wavefront expansion from the previous wavefront and from unvisited robot cells,
     # through every free unvisited cell (new or previously unreachable).
@@ -360,7 +437,8 @@ def _process(
                     parent[lv] = lu
 
     # 4. Forget components without a robot. Every component now holds a previous robot
-    # cell, a split seed or a new robot cell, so those are the only candidates.
+    # cell, a split seed, a neighbour of a removed cell or a new robot cell, so those are
+    # the only candidates.
     kept = np.empty(robots.shape[0], np.int64)
     n_kept = 0
     for i in range(robots.shape[0]):
@@ -368,9 +446,14 @@ def _process(
         if flat >= 0 and visited[flat]:
             kept[n_kept] = _find(parent, label[flat])
             n_kept += 1
-    n_candidates = n_pieces + previous_robots.shape[0]
+    n_candidates = n_pieces + previous_robots.shape[0] + n_unsplit
     for i in range(n_candidates):
-        flat = seed_cells[i + 1] if i < n_pieces else previous_robots[i - n_pieces]
+        if i < n_pieces:
+            flat = seed_cells[i + 1]
+        elif i < n_pieces + previous_robots.shape[0]:
+            flat = previous_robots[i - n_pieces]
+        else:
+            flat = unsplit_cells[i - n_pieces - previous_robots.shape[0]]
         if flat < 0 or not visited[flat]:
             continue
         root = _find(parent, label[flat])
