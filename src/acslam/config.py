@@ -306,7 +306,8 @@ class SlamConfig(StageParams):
     tentative_timeout_s: PositiveFloat = 10.0
     # A landmark's covariance relative to a robot's keyframe, from one iSAM2 joint
     # marginal, serves that robot's frames for this many keyframes after it, with the
-    # odometry chain since added (0: a joint marginal in every frame).
+    # odometry chain since added; so does the robot's own pose marginal (0: fresh
+    # marginals in every frame).
     association_covariance_reuse_keyframes: Annotated[int, Field(ge=0)] = 5
     # A point and a landmark that both carry binary descriptors (ORB: 256 bits) are
     # candidates only within this Hamming distance; ORB-SLAM matches within 50-100 bits.

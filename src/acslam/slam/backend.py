@@ -62,6 +62,8 @@ class _Robot:
     cum_var_xy: list[float] = field(default_factory=lambda: [0.0])
     cum_var_theta: list[float] = field(default_factory=lambda: [0.0])
     cum_distance_m: list[float] = field(default_factory=lambda: [0.0])
+    # The latest iSAM2 marginal of one of this robot's keyframes: (keyframe index, 6x6).
+    pose_marginal: tuple[int, np.ndarray] | None = None
 
 
 def _planar_covariance(pose6_cov: np.ndarray, yaw: float) -> np.ndarray:
@@ -287,12 +289,15 @@ class SlamBackend:
 
     def reference(self, robot: _Robot) -> tuple[int | None, gtsam.Pose3, np.ndarray]:
         """The robot's latest *optimised* keyframe (None before the first update), its
-        pose, and its 6x6 covariance plus the odometry variances of the pending keyframes
-        after it (the pose whose cross-covariances with the landmarks iSAM2 can give)."""
+        pose, and its 6x6 covariance (:meth:`_keyframe_marginal`) plus the odometry
+        variances of the pending keyframes after it (the pose whose cross-covariances with
+        the landmarks iSAM2 can give)."""
         pending = np.zeros(6)
-        for key in reversed(robot.pose_keys):
+        for index in range(len(robot.pose_keys) - 1, -1, -1):
+            key = robot.pose_keys[index]
             if self._estimate.exists(key):
-                return key, self._estimate.atPose3(key), self._marginal(key) + np.diag(pending)
+                covariance = self._keyframe_marginal(robot, index) + np.diag(pending)
+                return key, self._estimate.atPose3(key), covariance
             pending = pending + self._odometry_variances.get(key, 0.0)
         first = robot.pose_keys[0]
         return None, self.pose_estimate(first), self.pose_covariance(robot)
@@ -354,13 +359,43 @@ class SlamBackend:
         return poses
 
     def pose_covariance(self, robot: _Robot) -> np.ndarray:
-        """6x6 marginal of the latest keyframe; a pending one adds its odometry variances."""
+        """6x6 marginal of the latest optimised keyframe (:meth:`_keyframe_marginal`); a
+        pending keyframe adds its odometry variances."""
         pending = 0.0
-        for key in reversed(robot.pose_keys):
+        for index in range(len(robot.pose_keys) - 1, -1, -1):
+            key = robot.pose_keys[index]
             if self._estimate.exists(key):
-                return self._marginal(key) + np.diag(np.zeros(6) + pending)
+                return self._keyframe_marginal(robot, index) + np.diag(np.zeros(6) + pending)
             pending = pending + self._odometry_variances.get(key, 0.0)
         return np.diag(prior_noise(self.config).sigmas() ** 2 + pending)
+
+    def _keyframe_marginal(self, robot: _Robot, index: int) -> np.ndarray:
+        """6x6 marginal of the robot's optimised keyframe ``index``, or a bound on it.
+
+        An iSAM2 marginal costs more as the graph grows, and association wants one in
+        every frame. Within ``association_covariance_reuse_keyframes`` keyframes of the
+        last one computed for this robot, that one serves, carried along the odometry
+        chain since (first order: P' = Ad(T^-1) P Ad(T^-1)^T + Q per step, in GTSAM's
+        body-frame tangent): the marginal of the graph of that update with only the
+        odometry since added. What the graph learnt besides only shrinks a marginal, so
+        the bound errs on the wide side (as the landmark covariances reused in
+        :meth:`LandmarkAssociation._reusable` do).
+        """
+        cached = robot.pose_marginal
+        if cached is not None:
+            since, covariance = cached
+            if 0 <= index - since < self.config.association_covariance_reuse_keyframes:
+                for step in range(since + 1, index + 1):
+                    previous, key = robot.pose_keys[step - 1], robot.pose_keys[step]
+                    relative = self.pose_estimate(previous).between(self.pose_estimate(key))
+                    adjoint = relative.inverse().AdjointMap()
+                    covariance = adjoint @ covariance @ adjoint.T + np.diag(
+                        self._odometry_variances[key]
+                    )
+                return covariance
+        covariance = self._marginal(robot.pose_keys[index])
+        robot.pose_marginal = (index, covariance)
+        return covariance
 
     def _landmark_covariance(self, index: int) -> np.ndarray:
         pending = self._pending_landmark_covs.get(index)
