@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from acslam.errors import ConfigError
-from acslam.experiments.grid import builtin_grid, expand, load_grid_file
+from acslam.experiments.grid import builtin_grid, check_cells, expand, load_grid_file
 from acslam.scenario import load_scenario
 
 
@@ -105,3 +105,16 @@ def test_scaling_grid_scenarios_have_eight_start_poses() -> None:
 def test_unknown_builtin_grid() -> None:
     with pytest.raises(ConfigError, match="built-ins: thesis, scaling"):
         builtin_grid("chapter6")
+
+
+def test_example_allocator_grid_is_every_thesis_experiment_with_both_allocators() -> None:
+    path = Path(__file__).resolve().parents[2] / "examples" / "grids" / "allocators-10-seeds.yaml"
+    grid = load_grid_file(path)
+    check_cells(grid, str(path))
+    specs = expand(grid)
+    assert {(s.scenario, s.robots, s.allocator, s.seed) for s in specs} == {
+        (f"thesis-exp{n}", 3, allocator, seed)
+        for n in range(1, 6)
+        for allocator in ("factor-graph", "hungarian")
+        for seed in range(10)
+    }
