@@ -292,15 +292,23 @@ class SlamBackend:
         pose, and its 6x6 covariance (:meth:`_keyframe_marginal`) plus the odometry
         variances of the pending keyframes after it (the pose whose cross-covariances with
         the landmarks iSAM2 can give)."""
+        index, pending = self._latest_optimised(robot)
+        if index is None:
+            first = robot.pose_keys[0]
+            return None, self.pose_estimate(first), self.pose_covariance(robot)
+        key = robot.pose_keys[index]
+        covariance = self._keyframe_marginal(robot, index) + np.diag(pending)
+        return key, self._estimate.atPose3(key), covariance
+
+    def _latest_optimised(self, robot: _Robot) -> tuple[int | None, np.ndarray]:
+        """Index of the robot's latest optimised keyframe (None before the first update)
+        and the summed odometry variances of the pending keyframes after it."""
         pending = np.zeros(6)
         for index in range(len(robot.pose_keys) - 1, -1, -1):
-            key = robot.pose_keys[index]
-            if self._estimate.exists(key):
-                covariance = self._keyframe_marginal(robot, index) + np.diag(pending)
-                return key, self._estimate.atPose3(key), covariance
-            pending = pending + self._odometry_variances.get(key, 0.0)
-        first = robot.pose_keys[0]
-        return None, self.pose_estimate(first), self.pose_covariance(robot)
+            if self._estimate.exists(robot.pose_keys[index]):
+                return index, pending
+            pending = pending + self._odometry_variances.get(robot.pose_keys[index], 0.0)
+        return None, pending
 
     def landmark_blocks(
         self, ref_key: int | None, columns: list[int]
@@ -361,13 +369,10 @@ class SlamBackend:
     def pose_covariance(self, robot: _Robot) -> np.ndarray:
         """6x6 marginal of the latest optimised keyframe (:meth:`_keyframe_marginal`); a
         pending keyframe adds its odometry variances."""
-        pending = 0.0
-        for index in range(len(robot.pose_keys) - 1, -1, -1):
-            key = robot.pose_keys[index]
-            if self._estimate.exists(key):
-                return self._keyframe_marginal(robot, index) + np.diag(np.zeros(6) + pending)
-            pending = pending + self._odometry_variances.get(key, 0.0)
-        return np.diag(prior_noise(self.config).sigmas() ** 2 + pending)
+        index, pending = self._latest_optimised(robot)
+        if index is None:
+            return np.diag(prior_noise(self.config).sigmas() ** 2 + pending)
+        return self._keyframe_marginal(robot, index) + np.diag(pending)
 
     def _keyframe_marginal(self, robot: _Robot, index: int) -> np.ndarray:
         """6x6 marginal of the robot's optimised keyframe ``index``, or a bound on it.
