@@ -9,7 +9,7 @@ from scipy import ndimage
 from acslam.config import CostmapConfig, FloorplanWorld
 from acslam.mapping.costmap import compute_costmap
 from acslam.planning.astar import path_costs_to
-from acslam.planning.travel_graph import build_travel_graph, travel_costs
+from acslam.planning.travel_graph import TravelGraph, TravelGraphBuilder, travel_costs
 from acslam.worlds.floorplan import floorplan_world
 from acslam.worlds.mapio import world_cells
 
@@ -45,7 +45,7 @@ def graph_costs(
     lethal: np.ndarray, starts: np.ndarray, targets: np.ndarray, block_cells: int
 ) -> np.ndarray:
     cost = np.zeros(lethal.shape)
-    graph = build_travel_graph(cost, lethal, RES_M, 0.0, block_cells)
+    graph = TravelGraphBuilder().build(cost, lethal, RES_M, 0.0, block_cells)
     return travel_costs(graph, cost, lethal, starts, targets, RES_M, 0.0, end_blocks=1)
 
 
@@ -126,3 +126,46 @@ def test_targets_next_to_the_robot_and_lethal_targets() -> None:
     exact = exact_costs(lethal, starts, targets)
     np.testing.assert_allclose(approx[:, :2], exact[:, :2], rtol=1e-12)  # fine in the box
     assert approx[0, 2] == np.inf == exact[0, 2]
+
+
+GRAPH_ARRAYS = ("node_cells", "block_nodes", "offsets", "neighbours", "costs")
+
+
+def assert_same_graph(incremental: TravelGraph, fresh: TravelGraph) -> None:
+    for field in GRAPH_ARRAYS:
+        np.testing.assert_array_equal(getattr(incremental, field), getattr(fresh, field))
+
+
+@pytest.mark.parametrize(("seed", "block_cells"), [(0, 4), (1, 7), (2, 10)])
+def test_a_builder_that_relabels_changed_blocks_gives_the_fresh_graph(
+    seed: int, block_cells: int
+) -> None:
+    """After any sequence of map updates (obstacles appearing, doors opening, speckle
+    that splits blocks into many components, costs changing everywhere), the graph a
+    builder patches from its last one equals, array for array, a fresh build."""
+    rng = np.random.default_rng(seed)
+    size = 150
+    lethal = rooms_map(rng, size)
+    builder = TravelGraphBuilder()
+    for _ in range(40):
+        r, c = rng.integers(0, size - 1, 2)
+        height, width = rng.integers(1, 16, 2)
+        patch = lethal[r : r + height, c : c + width]
+        patch[:] = rng.random(patch.shape) < rng.choice([0.0, 0.3, 1.0])
+        cost = rng.random(lethal.shape)
+        assert_same_graph(
+            builder.build(cost, lethal, RES_M, 2.0, block_cells),
+            TravelGraphBuilder().build(cost, lethal, RES_M, 2.0, block_cells),
+        )
+
+
+def test_a_builder_starts_over_when_the_window_or_the_block_size_changes() -> None:
+    rng = np.random.default_rng(3)
+    builder = TravelGraphBuilder()
+    for size, block_cells in ((120, 4), (160, 4), (160, 6), (100, 6)):
+        lethal = rooms_map(rng, size)
+        cost = np.zeros(lethal.shape)
+        assert_same_graph(
+            builder.build(cost, lethal, RES_M, 0.0, block_cells),
+            TravelGraphBuilder().build(cost, lethal, RES_M, 0.0, block_cells),
+        )

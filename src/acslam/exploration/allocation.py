@@ -51,7 +51,7 @@ from acslam.exploration.params import TravelParams, UtilityParams
 from acslam.mapping.costmap import Costmap
 from acslam.pipeline.stages import Cells, Clusters, Goals
 from acslam.planning.astar import path_costs_to, snap_to_free
-from acslam.planning.travel_graph import build_travel_graph, travel_costs
+from acslam.planning.travel_graph import TravelGraphBuilder, travel_costs
 
 _MIN_LOG_FACTOR = -600.0
 """Factor values below e^-600 are stored as e^-600 (doubles underflow near e^-745)."""
@@ -252,9 +252,11 @@ def cluster_distances_m(
     clusters: Sequence[FrontierCluster],
     costmap: Costmap,
     params: TravelParams,
+    travel_graph: TravelGraphBuilder | None = None,
 ) -> np.ndarray:
     """(robots, clusters) d: path cost (Dijkstra per robot, or the travel graph for all of
-    them), or straight-line metres."""
+    them), or straight-line metres. ``travel_graph`` keeps the graph of the last costmap
+    (an allocator passes its own, so a replan rebuilds only the blocks that changed)."""
     spec = costmap.spec
     cells = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
     targets = np.array([c.target_cell for c in clusters], dtype=np.int64).reshape(-1, 2)
@@ -279,7 +281,7 @@ def cluster_distances_m(
     with np.errstate(invalid="ignore"):
         if params.distance_metric == "travel-graph" and snapped:
             block_cells = max(1, round(params.travel_block_m / spec.resolution_m))
-            graph = build_travel_graph(
+            graph = (travel_graph or TravelGraphBuilder()).build(
                 costmap.cost, costmap.lethal, spec.resolution_m, params.path_cost_weight,
                 block_cells,
             )  # fmt: skip
@@ -304,11 +306,12 @@ def committed_distances_m(
     costmap: Costmap,
     params: TravelParams,
     current: Sequence[int | None] | None,
+    travel_graph: TravelGraphBuilder | None = None,
 ) -> np.ndarray:
     """d with each robot's current cluster ``params.commitment_m`` closer, so a robot
     switches goals only for a clearly better one (without it, re-allocating every few
     seconds makes robots dither between frontiers)."""
-    distances = cluster_distances_m(robot_cells, clusters, costmap, params)
+    distances = cluster_distances_m(robot_cells, clusters, costmap, params, travel_graph)
     for robot, cluster in enumerate(current or []):
         if cluster is not None and np.isfinite(distances[robot, cluster]):
             distances[robot, cluster] = max(0.0, distances[robot, cluster] - params.commitment_m)
@@ -336,6 +339,7 @@ class _TravelAllocator:
 
     def __init__(self, params: TravelParams) -> None:
         self.params = params
+        self._travel_graph = TravelGraphBuilder()
 
     def allocate(
         self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
@@ -345,7 +349,9 @@ class _TravelAllocator:
             return Allocation(
                 self.params.name, self.solver, (None,) * robots, np.zeros((robots, 0))
             )
-        distances = committed_distances_m(robot_cells, clusters, costmap, self.params, current)
+        distances = committed_distances_m(
+            robot_cells, clusters, costmap, self.params, current, self._travel_graph
+        )
         solver, assignment = self._solve(distances, clusters)
         return Allocation(self.params.name, solver, tuple(assignment), distances)
 

@@ -101,7 +101,7 @@ def heap_pop(heap: np.ndarray, size: int) -> tuple[float, int, int]:
 
 
 @numba.njit(cache=True)
-def _search(
+def grid_search(
     factor: np.ndarray,
     lethal: np.ndarray,
     start_r: int,
@@ -227,7 +227,7 @@ def _checked_search(
     if lethal[sr, sc] or lethal[gr, gc]:
         which = "start" if lethal[sr, sc] else "goal"
         raise NoPathError(f"no path from cell ({sr}, {sc}) to ({gr}, {gc}): {which} is lethal")
-    g, parent, expanded = _search(
+    g, parent, expanded = grid_search(
         step_factor(cost, cost_weight), lethal, sr, sc, gr, gc, resolution_m, np.zeros(0, np.int64)
     )
     goal = gr * lethal.shape[1] + gc
@@ -284,7 +284,9 @@ def path_costs_to(
     if lethal[sr, sc] or len(targets) == 0:
         return np.full(len(targets), np.inf)
     flat = targets[:, 0] * lethal.shape[1] + targets[:, 1]
-    g, _, _ = _search(step_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat)
+    g, _, _ = grid_search(
+        step_factor(cost, cost_weight), lethal, sr, sc, -1, -1, resolution_m, flat
+    )
     return g[flat]
 
 

@@ -1,8 +1,8 @@
 """Travel distances on a coarse graph of the costmap: allocation at building scale.
 
 Allocation needs the path length from every robot to every frontier cluster. One Dijkstra
-per robot on the costmap visits every cell of the window (~300 ns each): at 0.05 m a
-50 m x 50 m window is 1 M cells, a third of a second per robot.
+per robot on the costmap visits every cell of the window (100-200 ns each): at 0.05 m a
+100 m x 100 m window is 4 M cells, a few hundred milliseconds per robot.
 
 The coarse graph has one node per 8-connected set of free cells inside a block of
 ``k x k`` cells (with A*'s corner rule), so it is connected exactly where the costmap is:
@@ -15,8 +15,17 @@ reaching a target inside the box), and one around each target gives the last leg
 target legs run from the target outwards: with a path cost weight of 0 that is the same
 cost, with a weight the cell factors are charged at the other end of each step.
 
-The coarse search is scipy's Dijkstra (C; 3x faster here than a numba one with our heap)
-from one extra source node per robot, joined to the nodes of its box at their fine costs.
+Between replans a map update changes a few rooms, not the building: a
+:class:`TravelGraphBuilder` keeps each block's components and edges and redoes only the
+blocks whose lethal cells changed (and the edges that touch them), to the bit the graph a
+fresh build gives.
+
+The coarse search is scipy's Dijkstra (C; 1.6-1.9x faster here than a numba one with
+our heap) from one extra source node per robot, joined to the nodes of its box at their
+fine costs.
+Larger blocks search faster but cost accuracy: on the IPA floor plans, 0.2 m blocks keep
+95 % of robot-target lengths within 1.6 % of the exact ones, 0.5 m blocks within 3.6 %,
+with single short paths up to 19 % off.
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from acslam.planning.astar import path_costs_to, step_factor
+from acslam.planning.astar import grid_search, step_factor
 
 
 @dataclass(frozen=True)
@@ -57,69 +66,100 @@ class TravelGraph:
 
 
 @numba.njit(cache=True)
-def _label_blocks(lethal: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per block, 8-connected components of its free cells (corner rule as A*)."""
+def _changed_blocks(lethal: np.ndarray, previous: np.ndarray, k: int) -> np.ndarray:
+    """Per block, whether any of its cells' lethal flag differs from ``previous``. Compares
+    eight cells at a time: a map update changes a few rooms, so almost every word is equal."""
     rows, cols = lethal.shape
-    block_rows = (rows + k - 1) // k
     block_cols = (cols + k - 1) // k
-    node_of_cell = np.empty((rows, cols), dtype=np.int32)
-    reps = np.empty(block_rows * block_cols + 16, dtype=np.int64)
-    block_nodes = np.empty(block_rows * block_cols + 1, dtype=np.int64)
+    changed = np.zeros(((rows + k - 1) // k) * block_cols, dtype=np.bool_)
+    new, old = lethal.ravel().view(np.uint8), previous.ravel().view(np.uint8)
+    words = len(new) // 8
+    new_words, old_words = new[: 8 * words].view(np.uint64), old[: 8 * words].view(np.uint64)
+    for w in range(words + 1):
+        if w < words and new_words[w] == old_words[w]:
+            continue
+        for cell in range(8 * w, min(8 * w + 8, len(new))):
+            if new[cell] != old[cell]:
+                r = cell // cols
+                changed[(r // k) * block_cols + (cell - r * cols) // k] = True
+    return changed
+
+
+@numba.njit(cache=True)
+def _label_blocks(
+    lethal: np.ndarray,
+    k: int,
+    changed: np.ndarray,
+    label: np.ndarray,
+    counts: np.ndarray,
+    reps: np.ndarray,
+) -> None:
+    """Relabel the changed blocks: the 8-connected components of a block's free cells
+    (corner rule as A*) numbered from 0 in raster order of their first cell, in ``label``
+    (-1 on lethal cells); per block their count and, in ``reps[j, block]``, the flat index
+    of component ``j``'s member cell nearest the block centre (the lower index on ties)."""
+    rows, cols = lethal.shape
+    block_cols = (cols + k - 1) // k
     stack = np.empty(k * k, dtype=np.int64)
-    nodes = 0
-    for br in range(block_rows):
+    for b in np.flatnonzero(changed):
+        br, bc = b // block_cols, b % block_cols
         r0, r1 = br * k, min(br * k + k, rows)
-        for bc in range(block_cols):
-            c0, c1 = bc * k, min(bc * k + k, cols)
-            block_nodes[br * block_cols + bc] = nodes
-            free_cells = 0
-            for r in range(r0, r1):
-                for c in range(c0, c1):
-                    free_cells += not lethal[r, c]
-            while nodes + k * k > reps.shape[0]:
-                reps = np.concatenate((reps, np.empty_like(reps)))
-            if free_cells == (r1 - r0) * (c1 - c0):  # one node: the whole block
-                node_of_cell[r0:r1, c0:c1] = nodes
-                reps[nodes] = ((r0 + r1 - 1) // 2) * cols + (c0 + c1 - 1) // 2
-                nodes += 1
-                continue
-            node_of_cell[r0:r1, c0:c1] = -1
-            if free_cells == 0:
-                continue
-            for r in range(r0, r1):
-                for c in range(c0, c1):
-                    if lethal[r, c] or node_of_cell[r, c] >= 0:
-                        continue
-                    best = r * cols + c
-                    best_d2 = (2 * r - r0 - r1 + 1) ** 2 + (2 * c - c0 - c1 + 1) ** 2
-                    node_of_cell[r, c] = nodes
-                    stack[0] = r * cols + c
-                    top = 1
-                    while top > 0:
-                        top -= 1
-                        cell = stack[top]
-                        cr = cell // cols
-                        cc = cell - cr * cols
-                        # squared distance to the block centre, doubled to stay integer
-                        d2 = (2 * cr - r0 - r1 + 1) ** 2 + (2 * cc - c0 - c1 + 1) ** 2
-                        if d2 < best_d2 or (d2 == best_d2 and cell < best):
-                            best, best_d2 = cell, d2
-                        for dr in range(-1, 2):
-                            for dc in range(-1, 2):
-                                nr, nc = cr + dr, cc + dc
-                                if nr < r0 or nr >= r1 or nc < c0 or nc >= c1:
-                                    continue
-                                if lethal[nr, nc] or node_of_cell[nr, nc] >= 0:
-                                    continue
-                                if dr != 0 and dc != 0 and lethal[nr, cc] and lethal[cr, nc]:
-                                    continue
-                                node_of_cell[nr, nc] = nodes
-                                stack[top] = nr * cols + nc
-                                top += 1
-                    reps[nodes] = best
-                    nodes += 1
-    block_nodes[block_rows * block_cols] = nodes
-    return node_of_cell, reps[:nodes], block_nodes
+        c0, c1 = bc * k, min(bc * k + k, cols)
+        free_cells = 0
+        for r in range(r0, r1):
+            for c in range(c0, c1):
+                free_cells += not lethal[r, c]
+        if free_cells == (r1 - r0) * (c1 - c0):  # one component: the whole block
+            label[r0:r1, c0:c1] = 0
+            reps[0, b] = ((r0 + r1 - 1) // 2) * cols + (c0 + c1 - 1) // 2
+            counts[b] = 1
+            continue
+        label[r0:r1, c0:c1] = -1
+        components = 0
+        for r in range(r0, r1):
+            for c in range(c0, c1):
+                if lethal[r, c] or label[r, c] >= 0:
+                    continue
+                best = r * cols + c
+                best_d2 = (2 * r - r0 - r1 + 1) ** 2 + (2 * c - c0 - c1 + 1) ** 2
+                label[r, c] = components
+                stack[0] = r * cols + c
+                top = 1
+                while top > 0:
+                    top -= 1
+                    cell = stack[top]
+                    cr = cell // cols
+                    cc = cell - cr * cols
+                    # squared distance to the block centre, doubled to stay integer
+                    d2 = (2 * cr - r0 - r1 + 1) ** 2 + (2 * cc - c0 - c1 + 1) ** 2
+                    if d2 < best_d2 or (d2 == best_d2 and cell < best):
+                        best, best_d2 = cell, d2
+                    for dr in range(-1, 2):
+                        for dc in range(-1, 2):
+                            nr, nc = cr + dr, cc + dc
+                            if nr < r0 or nr >= r1 or nc < c0 or nc >= c1:
+                                continue
+                            if lethal[nr, nc] or label[nr, nc] >= 0:
+                                continue
+                            if dr != 0 and dc != 0 and lethal[nr, cc] and lethal[cr, nc]:
+                                continue
+                            label[nr, nc] = components
+                            stack[top] = nr * cols + nc
+                            top += 1
+                reps[components, b] = best
+                components += 1
+        counts[b] = components
+
+
+@numba.njit(cache=True)
+def _node_cells(reps: np.ndarray, counts: np.ndarray, starts: np.ndarray, cols: int) -> np.ndarray:
+    """(nodes, 2) ``[row, col]`` of every node, block by block."""
+    cells = np.empty((starts[-1], 2), dtype=np.int64)
+    for b in range(len(counts)):
+        for j in range(counts[b]):
+            cells[starts[b] + j, 0] = reps[j, b] // cols
+            cells[starts[b] + j, 1] = reps[j, b] % cols
+    return cells
 
 
 @numba.njit(cache=True, inline="always")
@@ -129,65 +169,130 @@ def _step_allowed(lethal: np.ndarray, r: int, c: int, nr: int, nc: int) -> bool:
     return not (nr != r and nc != c and lethal[nr, c] and lethal[r, nc])
 
 
+# A block's edges to its right, lower, lower-right and lower-left neighbours, as
+# (own component, which neighbour, neighbour's component).
+_RIGHT, _DOWN, _DOWN_RIGHT, _DOWN_LEFT = 0, 1, 2, 3
+
+
 @numba.njit(cache=True)
-def _add_edge(found: np.ndarray, count: int, a: int, b: int) -> int:
-    """Append (a, b) to the block pair's list unless it is there already."""
+def _add_edge(found: np.ndarray, count: int, a: int, side: int, b: int) -> int:
+    """Append the edge to the block's list unless it is there already."""
     for i in range(count):
-        if found[i, 0] == a and found[i, 1] == b:
+        if found[i, 0] == a and found[i, 1] == side and found[i, 2] == b:
             return count
     found[count, 0] = a
-    found[count, 1] = b
+    found[count, 1] = side
+    found[count, 2] = b
     return count + 1
 
 
 @numba.njit(cache=True)
-def _block_edges(node_of_cell: np.ndarray, lethal: np.ndarray, k: int) -> np.ndarray:
-    """(E, 2) node pairs that touch across a block edge or corner, each pair once."""
+def _edges_of_block(
+    label: np.ndarray, lethal: np.ndarray, k: int, b: int, found: np.ndarray
+) -> int:
+    """Block ``b``'s edges into ``found``: the node pairs that touch across its right
+    edge, its lower edge or its lower corners (with A*'s corner rule), each pair once."""
+    rows, cols = lethal.shape
+    block_cols = (cols + k - 1) // k
+    br, bc = b // block_cols, b % block_cols
+    r0, r1 = br * k, min(br * k + k, rows)
+    c0, c1 = bc * k, min(bc * k + k, cols)
+    n = 0
+    if c1 < cols:  # steps from column c1 - 1 to c1, rows inside the band
+        for r in range(r0, r1):
+            for nr in range(max(r - 1, r0), min(r + 2, r1)):
+                if _step_allowed(lethal, r, c1 - 1, nr, c1):
+                    n = _add_edge(found, n, label[r, c1 - 1], _RIGHT, label[nr, c1])
+    if r1 < rows:
+        for c in range(c0, c1):
+            for nc in range(max(c - 1, c0), min(c + 2, c1)):
+                if _step_allowed(lethal, r1 - 1, c, r1, nc):
+                    n = _add_edge(found, n, label[r1 - 1, c], _DOWN, label[r1, nc])
+        if c1 < cols and _step_allowed(lethal, r1 - 1, c1 - 1, r1, c1):
+            n = _add_edge(found, n, label[r1 - 1, c1 - 1], _DOWN_RIGHT, label[r1, c1])
+        if c0 > 0 and _step_allowed(lethal, r1 - 1, c0, r1, c0 - 1):
+            n = _add_edge(found, n, label[r1 - 1, c0], _DOWN_LEFT, label[r1, c0 - 1])
+    return n
+
+
+@numba.njit(cache=True)
+def _block_edges(
+    label: np.ndarray,
+    lethal: np.ndarray,
+    counts: np.ndarray,
+    k: int,
+    changed: np.ndarray,
+    old_offsets: np.ndarray,
+    old_edges: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every block's edges (:func:`_edges_of_block`), block ``b``'s as
+    ``edges[offsets[b]:offsets[b + 1]]``. A block's edges depend only on its own cells and
+    on those of the neighbours it owns edges to: where none of them changed, its old ones
+    are copied (``old_offsets`` empty: none are kept)."""
     rows, cols = lethal.shape
     block_rows = (rows + k - 1) // k
     block_cols = (cols + k - 1) // k
-    edges = np.empty((4 * block_rows * block_cols + 16, 2), dtype=np.int64)
-    count = 0
-    found = np.empty((3 * k + 2, 2), dtype=np.int64)
-    for br in range(block_rows):
-        r0, r1 = br * k, min(br * k + k, rows)
-        for bc in range(block_cols):
-            c0, c1 = bc * k, min(bc * k + k, cols)
-            # right neighbour block: steps from column c1 - 1 to c1, rows inside the band
-            if c1 < cols:
-                n = 0
-                for r in range(r0, r1):
-                    for nr in range(max(r - 1, r0), min(r + 2, r1)):
-                        if _step_allowed(lethal, r, c1 - 1, nr, c1):
-                            n = _add_edge(found, n, node_of_cell[r, c1 - 1], node_of_cell[nr, c1])
-                while count + n > edges.shape[0]:
-                    edges = np.concatenate((edges, np.empty_like(edges)))
+    blocks = block_rows * block_cols
+    offsets = np.zeros(blocks + 1, dtype=np.int64)
+    edges = np.empty((max(2 * len(old_edges), 4 * blocks) + 16, 3), dtype=np.int32)
+    found = np.empty((6 * k + 2, 3), dtype=np.int32)
+    for b in range(blocks):
+        count = offsets[b]
+        if counts[b] > 0:
+            br, bc = b // block_cols, b % block_cols
+            stale = len(old_offsets) == 0 or changed[b]
+            if bc + 1 < block_cols:
+                stale = stale or changed[b + 1]
+            if br + 1 < block_rows:
+                stale = stale or changed[b + block_cols]
+                if bc + 1 < block_cols:
+                    stale = stale or changed[b + block_cols + 1]
+                if bc > 0:
+                    stale = stale or changed[b + block_cols - 1]
+            if stale:
+                n = _edges_of_block(label, lethal, k, b, found)
+            else:
+                n = old_offsets[b + 1] - old_offsets[b]
+            while count + n > edges.shape[0]:
+                edges = np.concatenate((edges, np.empty_like(edges)))
+            if stale:
                 edges[count : count + n] = found[:n]
-                count += n
-            if r1 < rows:
-                n = 0
-                # lower neighbour block
-                for c in range(c0, c1):
-                    for nc in range(max(c - 1, c0), min(c + 2, c1)):
-                        if _step_allowed(lethal, r1 - 1, c, r1, nc):
-                            n = _add_edge(found, n, node_of_cell[r1 - 1, c], node_of_cell[r1, nc])
-                # lower-right and lower-left blocks, through the block's corners
-                if c1 < cols and _step_allowed(lethal, r1 - 1, c1 - 1, r1, c1):
-                    n = _add_edge(found, n, node_of_cell[r1 - 1, c1 - 1], node_of_cell[r1, c1])
-                if c0 > 0 and _step_allowed(lethal, r1 - 1, c0, r1, c0 - 1):
-                    n = _add_edge(found, n, node_of_cell[r1 - 1, c0], node_of_cell[r1, c0 - 1])
-                while count + n > edges.shape[0]:
-                    edges = np.concatenate((edges, np.empty_like(edges)))
-                edges[count : count + n] = found[:n]
-                count += n
-    return edges[:count]
+            else:
+                edges[count : count + n] = old_edges[old_offsets[b] : old_offsets[b + 1]]
+            count += n
+        offsets[b + 1] = count
+    return offsets, edges[: offsets[-1]]
+
+
+@numba.njit(cache=True)
+def _node_pairs(
+    offsets: np.ndarray, edges: np.ndarray, starts: np.ndarray, block_cols: int
+) -> np.ndarray:
+    """(E, 2) node ids of the blocks' edges: block ``b``'s component ``j`` is
+    ``starts[b] + j``."""
+    step = np.array([1, block_cols, block_cols + 1, block_cols - 1])
+    pairs = np.empty((len(edges), 2), dtype=np.int64)
+    for b in range(len(offsets) - 1):
+        for e in range(offsets[b], offsets[b + 1]):
+            pairs[e, 0] = starts[b] + edges[e, 0]
+            pairs[e, 1] = starts[b + step[edges[e, 1]]] + edges[e, 2]
+    return pairs
 
 
 @numba.njit(cache=True)
 def _adjacency(
-    edges: np.ndarray, edge_cost: np.ndarray, nodes: int
+    edges: np.ndarray, node_cells: np.ndarray, factor: np.ndarray, resolution_m: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Both directions of every edge as CSR (offsets, neighbours, costs)."""
+    """Both directions of every edge as CSR (offsets, neighbours, costs): the octile
+    distance between the two representatives times the mean of their step factors."""
+    nodes = len(node_cells)
+    edge_cost = np.empty(len(edges))
+    for e in range(len(edges)):
+        a, b = edges[e, 0], edges[e, 1]
+        dr = abs(node_cells[a, 0] - node_cells[b, 0])
+        dc = abs(node_cells[a, 1] - node_cells[b, 1])
+        octile = max(dr, dc) + (math.sqrt(2.0) - 1.0) * min(dr, dc)
+        edge_cost[e] = resolution_m * octile * (0.5 * (factor[a] + factor[b]))
     offsets = np.zeros(nodes + 1, dtype=np.int64)
     for e in range(edges.shape[0]):
         offsets[edges[e, 0] + 1] += 1
@@ -206,73 +311,153 @@ def _adjacency(
     return offsets, neighbours, costs
 
 
-def build_travel_graph(
+class TravelGraphBuilder:
+    """Builds the coarse graph of one costmap after another, relabelling only the blocks
+    whose lethal cells changed since the last one (a map update changes a few rooms, not
+    the building). The graph is the same as a fresh builder's, to the bit."""
+
+    def __init__(self) -> None:
+        self._previous: np.ndarray | None = None  # the last lethal grid
+        self._block_cells = 0
+        self._label = np.empty((0, 0), dtype=np.int16)
+        self._counts = np.empty(0, dtype=np.int64)
+        self._reps = np.empty((0, 0), dtype=np.int64)
+        self._edge_offsets = np.empty(0, dtype=np.int64)  # empty: no edges kept
+        self._edges = np.empty((0, 3), dtype=np.int32)
+
+    def build(
+        self,
+        cost: np.ndarray,
+        lethal: np.ndarray,
+        resolution_m: float,
+        cost_weight: float,
+        block_cells: int,
+    ) -> TravelGraph:
+        """The coarse graph of a costmap (module docstring); steps cost as in A*."""
+        lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
+        rows, cols = lethal.shape
+        k = block_cells
+        block_cols = (cols + k - 1) // k
+        blocks = ((rows + k - 1) // k) * block_cols
+        previous = self._previous
+        if previous is None or previous.shape != lethal.shape or k != self._block_cells:
+            self._previous = previous = lethal.copy()
+            self._block_cells = k
+            # At most one component per two cells: a checkerboard with the corner rule.
+            self._label = np.empty(lethal.shape, dtype=np.int16)
+            self._counts = np.zeros(blocks, dtype=np.int64)
+            self._reps = np.empty(((k * k + 1) // 2, blocks), dtype=np.int64)
+            self._edge_offsets = np.empty(0, dtype=np.int64)
+            changed = np.ones(blocks, dtype=np.bool_)
+        else:
+            changed = _changed_blocks(lethal, previous, k)
+            np.copyto(previous, lethal)
+        _label_blocks(lethal, k, changed, self._label, self._counts, self._reps)
+        starts = np.zeros(blocks + 1, dtype=np.int64)
+        np.cumsum(self._counts, out=starts[1:])
+        node_cells = _node_cells(self._reps, self._counts, starts, cols)
+        reps = node_cells[:, 0] * cols + node_cells[:, 1]
+        self._edge_offsets, self._edges = _block_edges(
+            self._label, lethal, self._counts, k, changed, self._edge_offsets, self._edges
+        )
+        edges = _node_pairs(self._edge_offsets, self._edges, starts, block_cols)
+        rep_factor = step_factor(np.asarray(cost).ravel()[reps], cost_weight)
+        offsets, neighbours, costs = _adjacency(edges, node_cells, rep_factor, resolution_m)
+        return TravelGraph(
+            k, block_cols, lethal.shape, node_cells, starts, offsets, neighbours, costs
+        )
+
+
+@numba.njit(cache=True)
+def _box_searches(
     cost: np.ndarray,
-    lethal: np.ndarray,
-    resolution_m: float,
     cost_weight: float,
-    block_cells: int,
-) -> TravelGraph:
-    """The coarse graph of a costmap (module docstring); steps cost as in A*."""
-    lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
-    node_of_cell, reps, block_nodes = _label_blocks(lethal, block_cells)
-    cols = lethal.shape[1]
-    node_cells = np.stack([reps // cols, reps % cols], axis=1)
-    edges = _block_edges(node_of_cell, lethal, block_cells)
-    delta = np.abs(node_cells[edges[:, 0]] - node_cells[edges[:, 1]])
-    octile = delta.max(axis=1) + (math.sqrt(2.0) - 1.0) * delta.min(axis=1)
-    rep_factor = step_factor(np.asarray(cost).ravel()[reps], cost_weight)
-    mean_factor = 0.5 * (rep_factor[edges[:, 0]] + rep_factor[edges[:, 1]])
-    offsets, neighbours, costs = _adjacency(edges, resolution_m * octile * mean_factor, len(reps))
-    block_cols = (cols + block_cells - 1) // block_cells
-    return TravelGraph(
-        block_cells, block_cols, lethal.shape, node_cells, block_nodes, offsets, neighbours,
-        costs,
-    )  # fmt: skip
-
-
-def _box(
-    graph: TravelGraph, cell: np.ndarray, end_blocks: int
-) -> tuple[tuple[int, int, int, int], np.ndarray]:
-    """The cells ``(r0, r1, c0, c1)`` of the blocks within ``end_blocks`` blocks of the
-    cell's block, and the nodes of those blocks."""
-    k, block_cols = graph.block_cells, graph.block_cols
-    rows, cols = graph.shape
-    block_rows = (len(graph.block_nodes) - 1) // block_cols
-    br, bc = int(cell[0]) // k, int(cell[1]) // k
-    b_r0, b_r1 = max(br - end_blocks, 0), min(br + end_blocks + 1, block_rows)
-    b_c0, b_c1 = max(bc - end_blocks, 0), min(bc + end_blocks + 1, block_cols)
-    starts = graph.block_nodes[np.arange(b_r0, b_r1) * block_cols + b_c0]
-    ends = graph.block_nodes[np.arange(b_r0, b_r1) * block_cols + b_c1]
-    nodes = np.concatenate([np.arange(a, b) for a, b in zip(starts, ends, strict=True)])
-    return (b_r0 * k, min(b_r1 * k, rows), b_c0 * k, min(b_c1 * k, cols)), nodes
-
-
-def _fine_costs(
-    graph: TravelGraph,
-    cost: np.ndarray,
     lethal: np.ndarray,
-    cell: np.ndarray,
+    cells: np.ndarray,
     to_cells: np.ndarray,
-    resolution_m: float,
-    cost_weight: float,
+    block_nodes: np.ndarray,
+    node_cells: np.ndarray,
+    k: int,
     end_blocks: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Fine path costs from ``cell`` inside its box: to the box's nodes (ids, costs) and
-    to each of ``to_cells`` (inf outside the box)."""
-    (r0, r1, c0, c1), nodes = _box(graph, cell, end_blocks)
-    inside = (
-        (to_cells[:, 0] >= r0) & (to_cells[:, 0] < r1)
-        & (to_cells[:, 1] >= c0) & (to_cells[:, 1] < c1)
-    )  # fmt: skip
-    queries = np.concatenate([graph.node_cells[nodes], to_cells[inside]]) - (r0, c0)
-    costs = path_costs_to(
-        cost[r0:r1, c0:c1], lethal[r0:r1, c0:c1], (int(cell[0]) - r0, int(cell[1]) - c0),
-        queries, resolution_m, cost_weight,
-    )  # fmt: skip
-    direct = np.full(len(to_cells), np.inf)
-    direct[inside] = costs[len(nodes) :]
-    return nodes, costs[: len(nodes)], direct
+    resolution_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per cell, one Dijkstra on the costmap inside its box: the blocks within
+    ``end_blocks`` blocks of its own. Returns the box nodes of cell ``i`` as
+    ``nodes[offsets[i]:offsets[i + 1]]`` with the fine costs of reaching them
+    (``node_costs``), and (cells, to_cells) the fine cost to each of ``to_cells`` (inf
+    outside the box). A lethal cell reaches nothing."""
+    rows, cols = lethal.shape
+    block_cols = (cols + k - 1) // k
+    block_rows = (rows + k - 1) // k
+    boxes = np.empty((len(cells), 4), dtype=np.int64)  # block rows and cols, half-open
+    offsets = np.zeros(len(cells) + 1, dtype=np.int64)
+    for i in range(len(cells)):
+        br, bc = cells[i, 0] // k, cells[i, 1] // k
+        boxes[i, 0], boxes[i, 1] = max(br - end_blocks, 0), min(br + end_blocks + 1, block_rows)
+        boxes[i, 2], boxes[i, 3] = max(bc - end_blocks, 0), min(bc + end_blocks + 1, block_cols)
+        count = 0
+        for row in range(boxes[i, 0], boxes[i, 1]):
+            count += (
+                block_nodes[row * block_cols + boxes[i, 3]]
+                - block_nodes[row * block_cols + boxes[i, 2]]
+            )
+        offsets[i + 1] = offsets[i] + count
+    nodes = np.empty(offsets[-1], dtype=np.int64)
+    node_costs = np.full(offsets[-1], np.inf)
+    direct = np.full((len(cells), len(to_cells)), np.inf)
+    for i in range(len(cells)):
+        fill = offsets[i]
+        for row in range(boxes[i, 0], boxes[i, 1]):
+            first = block_nodes[row * block_cols + boxes[i, 2]]
+            last = block_nodes[row * block_cols + boxes[i, 3]]
+            nodes[fill : fill + last - first] = np.arange(first, last)
+            fill += last - first
+        r0, r1 = boxes[i, 0] * k, min(boxes[i, 1] * k, rows)
+        c0, c1 = boxes[i, 2] * k, min(boxes[i, 3] * k, cols)
+        if lethal[cells[i, 0], cells[i, 1]]:
+            continue
+        box_nodes = nodes[offsets[i] : offsets[i + 1]]
+        inside = np.flatnonzero(
+            (to_cells[:, 0] >= r0) & (to_cells[:, 0] < r1)
+            & (to_cells[:, 1] >= c0) & (to_cells[:, 1] < c1)
+        )  # fmt: skip
+        if len(box_nodes) + len(inside) == 0:
+            continue
+        queries = np.empty(len(box_nodes) + len(inside), dtype=np.int64)
+        width = c1 - c0
+        for j in range(len(box_nodes)):
+            cell = node_cells[box_nodes[j]]
+            queries[j] = (cell[0] - r0) * width + cell[1] - c0
+        for j in range(len(inside)):
+            cell = to_cells[inside[j]]
+            queries[len(box_nodes) + j] = (cell[0] - r0) * width + cell[1] - c0
+        # step_factor() of the box; 0 * inf on lethal cells is never read (never entered)
+        factor = 1.0 + cost_weight * cost[r0:r1, c0:c1]
+        g = grid_search(
+            factor, np.ascontiguousarray(lethal[r0:r1, c0:c1]), cells[i, 0] - r0,
+            cells[i, 1] - c0, -1, -1, resolution_m, queries,
+        )[0]  # fmt: skip
+        for j in range(len(box_nodes)):
+            node_costs[offsets[i] + j] = g[queries[j]]
+        for j in range(len(inside)):
+            direct[i, inside[j]] = g[queries[len(box_nodes) + j]]
+    return offsets, nodes, node_costs, direct
+
+
+@numba.njit(cache=True)
+def _join_legs(
+    from_starts: np.ndarray,
+    result: np.ndarray,
+    offsets: np.ndarray,
+    nodes: np.ndarray,
+    leg_costs: np.ndarray,
+) -> None:
+    """result[s, t] = min(result[s, t], min over t's box nodes of the graph cost from s
+    to the node plus the node's last leg to t)."""
+    for t in range(result.shape[1]):
+        for e in range(offsets[t], offsets[t + 1]):
+            for s in range(result.shape[0]):
+                result[s, t] = min(result[s, t], from_starts[s, nodes[e]] + leg_costs[e])
 
 
 def travel_costs(
@@ -289,37 +474,33 @@ def travel_costs(
     the fine cost where a target lies in a start's box, if lower."""
     starts = np.asarray(start_cells, dtype=np.int64).reshape(-1, 2)
     targets = np.asarray(target_cells, dtype=np.int64).reshape(-1, 2)
-    legs = []
-    no_cells = np.zeros((0, 2), dtype=np.int64)
-    for cell in targets:
-        if lethal[cell[0], cell[1]]:
-            legs.append((np.zeros(0, np.int64), np.zeros(0)))
-            continue
-        nodes, leg, _ = _fine_costs(
-            graph, cost, lethal, cell, no_cells, resolution_m, cost_weight, end_blocks
-        )
-        reached = np.isfinite(leg)
-        legs.append((nodes[reached], leg[reached]))
+    cost = np.ascontiguousarray(cost, dtype=np.float64)
+    lethal = np.ascontiguousarray(lethal, dtype=np.bool_)
+    boxes = (graph.block_nodes, graph.node_cells, graph.block_cells, end_blocks, resolution_m)
+    # The last legs run from each target outwards (module docstring).
+    leg_offsets, leg_nodes, leg_costs, _ = _box_searches(
+        cost, cost_weight, lethal, targets, np.zeros((0, 2), dtype=np.int64), *boxes
+    )
+    # The first legs, and the fine cost where a target lies in a start's box.
+    seed_offsets, seeds, seed_costs, result = _box_searches(
+        cost, cost_weight, lethal, starts, targets, *boxes
+    )
+    # One source node per start (rows n, n + 1, ...) joined to the nodes of its box that
+    # it reaches; scipy drops zero-cost edges, so they carry 1 more, taken off below.
     n = graph.node_count
-    offsets, neighbours, costs = [graph.offsets], [graph.neighbours], [graph.costs]
-    # The fine cost where a target lies in a start's box, lowered by the graph's below.
-    result = np.full((len(starts), len(targets)), np.inf)
-    for s, cell in enumerate(starts):
-        seeds, seed_costs, result[s] = _fine_costs(
-            graph, cost, lethal, cell, targets, resolution_m, cost_weight, end_blocks
-        )
-        reached = np.isfinite(seed_costs)
-        offsets.append(offsets[-1][-1:] + int(reached.sum()))
-        neighbours.append(seeds[reached])
-        # scipy drops zero-cost edges: the source edges carry 1 more, taken off below.
-        costs.append(seed_costs[reached] + 1.0)
-    # One source node per start (rows n, n + 1, ...) joined to the nodes of its box.
+    reached = np.isfinite(seed_costs)
+    reached_before = np.concatenate([[0], np.cumsum(reached)])
+    source_offsets = np.concatenate(
+        [graph.offsets, graph.offsets[-1] + reached_before[seed_offsets[1:]]]
+    )
     sources = csr_matrix(
-        (np.concatenate(costs), np.concatenate(neighbours), np.concatenate(offsets)),
+        (
+            np.concatenate([graph.costs, seed_costs[reached] + 1.0]),
+            np.concatenate([graph.neighbours, seeds[reached]]),
+            source_offsets,
+        ),
         shape=(n + len(starts), n + len(starts)),
     )
     from_starts = dijkstra(sources, directed=True, indices=np.arange(n, n + len(starts))) - 1.0
-    for t, (nodes, leg) in enumerate(legs):
-        through = (from_starts[:, nodes] + leg[None, :]).min(axis=1, initial=np.inf)
-        result[:, t] = np.minimum(result[:, t], through)
+    _join_legs(from_starts, result, leg_offsets, leg_nodes, leg_costs)
     return result
