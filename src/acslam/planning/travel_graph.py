@@ -250,15 +250,13 @@ def _block_edges(
                 if bc > 0:
                     stale = stale or changed[b + block_cols - 1]
             if stale:
-                n = _edges_of_block(label, lethal, k, b, found)
+                block_edges = found[: _edges_of_block(label, lethal, k, b, found)]
             else:
-                n = old_offsets[b + 1] - old_offsets[b]
+                block_edges = old_edges[old_offsets[b] : old_offsets[b + 1]]
+            n = len(block_edges)
             while count + n > edges.shape[0]:
                 edges = np.concatenate((edges, np.empty_like(edges)))
-            if stale:
-                edges[count : count + n] = found[:n]
-            else:
-                edges[count : count + n] = old_edges[old_offsets[b] : old_offsets[b + 1]]
+            edges[count : count + n] = block_edges
             count += n
         offsets[b + 1] = count
     return offsets, edges[: offsets[-1]]
@@ -270,7 +268,9 @@ def _node_pairs(
 ) -> np.ndarray:
     """(E, 2) node ids of the blocks' edges: block ``b``'s component ``j`` is
     ``starts[b] + j``."""
-    step = np.array([1, block_cols, block_cols + 1, block_cols - 1])
+    step = np.empty(4, dtype=np.int64)  # block index offset of each neighbour side
+    step[_RIGHT], step[_DOWN] = 1, block_cols
+    step[_DOWN_RIGHT], step[_DOWN_LEFT] = block_cols + 1, block_cols - 1
     pairs = np.empty((len(edges), 2), dtype=np.int64)
     for b in range(len(offsets) - 1):
         for e in range(offsets[b], offsets[b + 1]):
@@ -356,12 +356,11 @@ class TravelGraphBuilder:
         starts = np.zeros(blocks + 1, dtype=np.int64)
         np.cumsum(self._counts, out=starts[1:])
         node_cells = _node_cells(self._reps, self._counts, starts, cols)
-        reps = node_cells[:, 0] * cols + node_cells[:, 1]
         self._edge_offsets, self._edges = _block_edges(
             self._label, lethal, self._counts, k, changed, self._edge_offsets, self._edges
         )
         edges = _node_pairs(self._edge_offsets, self._edges, starts, block_cols)
-        rep_factor = step_factor(np.asarray(cost).ravel()[reps], cost_weight)
+        rep_factor = step_factor(np.asarray(cost)[node_cells[:, 0], node_cells[:, 1]], cost_weight)
         offsets, neighbours, costs = _adjacency(edges, node_cells, rep_factor, resolution_m)
         return TravelGraph(
             k, block_cols, lethal.shape, node_cells, starts, offsets, neighbours, costs
