@@ -312,7 +312,7 @@ def test_isam2_speed_measurement_is_consistent() -> None:
     assert result["per_keyframe_mean_ms"] == pytest.approx(result["mean_ms"] / 3)
     bucket = result["buckets"][0]
     assert bucket["per_keyframe_p95_ms"] == pytest.approx(bucket["p95_ms"] / 3)
-    assert 0 < bucket["association_mean_ms"] <= bucket["association_p95_ms"] * 1.5
+    assert bucket["association_mean_ms"] > 0 and bucket["association_p95_ms"] > 0
     assert 0 < result["mean_ms"] <= result["buckets"][0]["max_ms"]
     assert result["landmarks"] > 10
     assert result["final_position_error_m"] < 0.2
