@@ -41,10 +41,13 @@ ROUTES = {
     ],
     # Each robot closes a loop round a vine row: up one gap, back the next. Along a gap
     # the laser odometry still drifts (a few cm and mrad over 16 m); an open route
-    # would keep that drift, a loop closure spreads it out.
+    # would keep that drift, a loop closure spreads it out. The robots start in a column
+    # in the headland (y = 6.25, 6.85, 5.65): the northern one takes the northern loop,
+    # so no two first legs cross (crossing ones met head-on, whichever of the equal-cost
+    # paths A* returned).
     "vineyard": [
-        [(-1.0, 8.8), (15.5, 8.8), (15.5, 11.3), (-1.0, 11.3), (-1.0, 8.8)],
         [(-1.0, 6.2), (15.5, 6.2), (15.5, 3.8), (-1.0, 3.8), (-1.0, 6.2)],
+        [(-1.0, 8.8), (15.5, 8.8), (15.5, 11.3), (-1.0, 11.3), (-1.0, 8.8)],
         [(-1.0, 1.2), (15.5, 1.2), (15.5, -1.3), (-1.0, -1.3), (-1.0, 1.2)],
     ],
 }

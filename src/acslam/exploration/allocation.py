@@ -276,25 +276,22 @@ def cluster_distances_m(
             continue
         starts.append(start)
         snapped.append(i)
-    # With weight 0, the step factor is 0 * inf on lethal cells (never entered, so the
-    # NaN is harmless).
-    with np.errstate(invalid="ignore"):
-        if params.distance_metric == "travel-graph" and snapped:
-            block_cells = max(1, round(params.travel_block_m / spec.resolution_m))
-            graph = (travel_graph or TravelGraphBuilder()).build(
-                costmap.cost, costmap.lethal, spec.resolution_m, params.path_cost_weight,
-                block_cells,
+    if params.distance_metric == "travel-graph" and snapped:
+        block_cells = max(1, round(params.travel_block_m / spec.resolution_m))
+        graph = (travel_graph or TravelGraphBuilder()).build(
+            costmap.cost, costmap.lethal, spec.resolution_m, params.path_cost_weight,
+            block_cells,
+        )  # fmt: skip
+        distances[snapped] = travel_costs(
+            graph, costmap.cost, costmap.lethal, np.array(starts), targets,
+            spec.resolution_m, params.path_cost_weight, params.travel_end_blocks,
+        )  # fmt: skip
+    else:
+        for i, start in zip(snapped, starts, strict=True):
+            distances[i] = path_costs_to(
+                costmap.cost, costmap.lethal, (int(start[0]), int(start[1])), targets,
+                spec.resolution_m, params.path_cost_weight,
             )  # fmt: skip
-            distances[snapped] = travel_costs(
-                graph, costmap.cost, costmap.lethal, np.array(starts), targets,
-                spec.resolution_m, params.path_cost_weight, params.travel_end_blocks,
-            )  # fmt: skip
-        else:
-            for i, start in zip(snapped, starts, strict=True):
-                distances[i] = path_costs_to(
-                    costmap.cost, costmap.lethal, (int(start[0]), int(start[1])), targets,
-                    spec.resolution_m, params.path_cost_weight,
-                )  # fmt: skip
     if params.distance_metric == "euclidean":
         return np.where(np.isfinite(distances), euclidean, np.inf)
     return distances

@@ -430,11 +430,10 @@ def _box_searches(
         for j in range(len(inside)):
             cell = to_cells[inside[j]]
             queries[len(box_nodes) + j] = (cell[0] - r0) * width + cell[1] - c0
-        # step_factor() of the box; 0 * inf on lethal cells is never read (never entered)
-        factor = 1.0 + cost_weight * cost[r0:r1, c0:c1]
         g = grid_search(
-            factor, np.ascontiguousarray(lethal[r0:r1, c0:c1]), cells[i, 0] - r0,
-            cells[i, 1] - c0, -1, -1, resolution_m, queries,
+            np.ascontiguousarray(cost[r0:r1, c0:c1]), cost_weight,
+            np.ascontiguousarray(lethal[r0:r1, c0:c1]), cells[i, 0] - r0, cells[i, 1] - c0,
+            -1, -1, resolution_m, queries,
         )[0]  # fmt: skip
         for j in range(len(box_nodes)):
             node_costs[offsets[i] + j] = g[queries[j]]
