@@ -473,6 +473,10 @@ class ScanMatchingConfig(Section):
     max_sigma_m: PositiveFloat = 0.05
     max_sigma_rad: PositiveFloat = 0.02
     max_condition: Annotated[float, Field(ge=1)] = 25.0
+    # A verified loop closure is restarted this far either way along its least
+    # constrained axis; where a restart settles elsewhere with as good a fit, the gap is
+    # added to its covariance (0: no restarts). See scan_matching.with_restart_spread.
+    restart_offset_m: NonNegativeFloat = 0.3
     # Besides the previous keyframe, each keyframe is matched to the latest one at least
     # this far back along the robot's path (0: not at all), see lidar_constraints.
     sequential_baseline_m: NonNegativeFloat = 1.0

@@ -9,8 +9,9 @@ rotation noise per 0.3 m match drifted the heading ~0.015 rad and the row ends ~
 sideways; the longer match spans several links with one error. From time to time a
 keyframe is also matched to keyframes close in space, of the same robot much earlier or
 of another robot: loop closures, which tie trajectories together. Every match is
-verified before it enters the graph, and loop closures get a Huber kernel, because a
-wrong one would bend the whole map.
+verified before it enters the graph. A loop closure must also be the only fit near its
+guess (restarted to either side, the match comes back to it) and gets a Huber kernel,
+because a wrong one would bend the whole map.
 """
 
 from __future__ import annotations
@@ -21,7 +22,13 @@ import numpy as np
 
 from acslam.config import ScanMatchingConfig
 from acslam.geometry import between, transform_points
-from acslam.mapping.scan_matching import PreparedScan, match_scans, prepare_scan, verify
+from acslam.mapping.scan_matching import (
+    PreparedScan,
+    match_scans,
+    prepare_scan,
+    verify,
+    with_restart_spread,
+)
 from acslam.messages import LidarScan
 from acslam.slam.backend import SlamBackend
 from acslam.slam.loop_candidates import LoopCandidates
@@ -174,6 +181,10 @@ class LidarConstraints:
             limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
         if not verify(result, guess, self.config, strict=robust, max_correction_m=limit_m):
             return False
+        if robust:
+            result = with_restart_spread(reference, b.scan, result, self.config)
+            if not verify(result, guess, self.config, max_correction_m=limit_m):
+                return False
         slam.scans.add_constraint(
             a.scan_index, b.scan_index, result.relative, result.covariance, robust
         )
