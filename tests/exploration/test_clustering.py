@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
+from sklearn.cluster import DBSCAN
 
 from acslam.config import CostmapConfig
-from acslam.exploration.clustering import UnknownDiscCounter, cluster_frontiers
+from acslam.exploration.clustering import UnknownDiscCounter, cluster_frontiers, dbscan_labels
 from acslam.exploration.params import DbscanParams
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import compute_costmap
@@ -69,3 +71,31 @@ def test_information_gain_counts_unknown_cells_in_the_sensor_disc() -> None:
     for cell in [(0, 0), (50, 50), (99, 3), (10, 95)]:
         within = (rows - cell[0]) ** 2 + (cols - cell[1]) ** 2 <= (radius_m / RES_M) ** 2
         assert counter.count(np.array(cell)) == int((within & (values == -1)).sum())
+
+
+def frontier_walks(rng: np.random.Generator, cells: int, size: int) -> np.ndarray:
+    """Distinct cells of random 8-connected walks, in random order: frontier-like."""
+    found: set[tuple[int, int]] = set()
+    while len(found) < cells:
+        r, c = rng.integers(0, size, 2)
+        for _ in range(rng.integers(1, 60)):
+            found.add((int(r), int(c)))
+            r, c = np.clip(np.array([r, c]) + rng.integers(-1, 2, 2), 0, size - 1)
+            if len(found) == cells:
+                break
+    return rng.permutation(np.array(sorted(found), dtype=np.int64))
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_dbscan_labels_equal_scikit_learns(seed: int) -> None:
+    """The same labels as scikit-learn's DBSCAN with its k-d tree, on walks of 6 to 3,000
+    cells, with eps a whole number of cells (neighbours exactly eps apart) or not."""
+    rng = np.random.default_rng(seed)
+    cells = frontier_walks(rng, int(rng.choice([6, 11, 40, 300, 3000])), 400)
+    spec = GridSpec(*rng.uniform(-50, 50, 2).round(2), RES_M, 400, 400)
+    points_m = spec.cell_to_world(cells)
+    eps_m = float(rng.choice([0.1, 0.25, 0.3, 0.33]))
+    min_points = int(rng.choice([3, 5, 8]))
+    reference = DBSCAN(eps=eps_m, min_samples=min_points, algorithm="kd_tree").fit_predict(points_m)
+    labels = dbscan_labels(cells, points_m, eps_m, min_points, int(eps_m / RES_M) + 1)
+    np.testing.assert_array_equal(labels, reference)
