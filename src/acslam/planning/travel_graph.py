@@ -505,8 +505,9 @@ def _distances_to_legs(
             v, g = seeds[e], seed_costs[e]
             if g < cost_to[v]:
                 cost_to[v] = g
-                bucket = min(bucket, int(g * per_width))
-                slot = int(g * per_width) & mask
+                seed_bucket = int(g * per_width)
+                bucket = min(bucket, seed_bucket)
+                slot = seed_bucket & mask
                 entry_node[used], entry_next[used], head[slot] = v, head[slot], used
                 used += 1
                 pending += 1
