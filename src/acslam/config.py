@@ -444,6 +444,12 @@ class ScanMatchingConfig(Section):
     # the same k; a neighbourhood whose PCA thickness exceeds line_planarity_sigmas
     # predicted sigmas (a corner, an edge, clutter) is not used.
     line_neighbors: Annotated[int, Field(ge=3)] = 9
+    # One return per cell of this size (0: all), so dense near walls do not dominate.
+    voxel_filter_m: NonNegativeFloat = 0.02
+    # The least constrained axis counts only points whose normal's component along it
+    # exceeds this many sigmas of the normal's direction (a wall beside the robot does not
+    # constrain its length, whatever its fitted normals say).
+    normal_tilt_sigmas: NonNegativeFloat = 3.0
     line_max_extent_m: PositiveFloat = 1.0
     line_planarity_sigmas: PositiveFloat = 3.0
     surface_fit: Literal["parabola", "line"] = "parabola"

@@ -174,7 +174,8 @@ class LidarConstraints:
         the match is verified."""
         guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
         reference = a.scan if reference is None else reference
-        result = match_scans(reference, b.scan, guess, self.config)
+        # A sequential guess is odometry's over a short way; a loop's has drifted.
+        result = match_scans(reference, b.scan, guess, self.config, guess_from_odometry=not robust)
         limit_m = None
         if robust:
             way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
