@@ -88,10 +88,18 @@ def test_served_run_with_the_legacy_attachment(tiny_scenario: Path, tmp_path: Pa
 
         _until(graph_complete, 60)
         # The server publishes alpha's map -> odom once alpha's run has started: from then
-        # on each malformed message below has exactly one way to be dropped.
+        # on each malformed message below has exactly one way to be dropped. The robot
+        # publishes its odom -> base_footprint on the same topic, so only a transform whose
+        # parent is map tells that the run has started.
         started = []
+
+        def server_transform(sample) -> None:
+            message = wire.decode_cdr(sample.payload.to_bytes(), "tf2_msgs/msg/TFMessage", "humble")
+            if any(t.header.frame_id == "map" for t in message.transforms):
+                started.append(True)
+
         tf_key = wire.topic_key(0, "/alpha/tf", "tf2_msgs/msg/TFMessage", "humble")
-        watch = session.declare_subscriber(tf_key, lambda sample: started.append(True))
+        watch = session.declare_subscriber(tf_key, server_transform)
         _until(lambda: started, 60)
         watch.undeclare()
         _send_malformed(session)
@@ -125,8 +133,13 @@ def test_served_run_with_the_legacy_attachment(tiny_scenario: Path, tmp_path: Pa
     for name in ("robot_0", "robot_1"):
         assert metrics["coverage"][name]["area_m2"] > 5.0  # both drove and mapped
         assert metrics["localization"][name]["rmse_m"] < 0.1  # truth from ground_truth
+    # A scan stamped before the odometry sample the run starts from, or delayed past the
+    # odometry history, has no pose to be placed at: on a loaded machine a few are dropped
+    # for that, and those drops say nothing about the malformed messages.
+    late = ("older than the odometry history", "before the first odometry")
     dropped = metrics["ros2"]["dropped"]
-    assert dropped == {
+    assert sum(n for k, n in dropped.items() if k.split(": ", 1)[1] in late) <= 4
+    assert {k: n for k, n in dropped.items() if k.split(": ", 1)[1] not in late} == {
         "/alpha/scan: no rmw_zenoh attachment": 1,
         "/alpha/scan: payload does not decode": 1,
         "/alpha/scan: invalid message": 1,
