@@ -23,7 +23,9 @@ def _drive(baseline_m: float) -> list[tuple[int, int]]:
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True
     world = World("box", GridSpec(0.0, 0.0, 0.05, 60, 120), occupied)
     sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(3))
-    slam = SlamBackend(SlamConfig(keyframe_distance_m=0.3), {0: np.array([1.0, 1.5, 0.0])})
+    # Exact odometry, three steps to a keyframe: no calibration to rescale them.
+    config = SlamConfig(keyframe_distance_m=0.3, odometry_calibration=False)
+    slam = SlamBackend(config, {0: np.array([1.0, 1.5, 0.0])})
     lidar = LidarConstraints(ScanMatchingConfig(sequential_baseline_m=baseline_m))
     pairs = []
     add = slam.scans.add_constraint

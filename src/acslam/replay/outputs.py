@@ -107,7 +107,8 @@ def replay_metrics(
     localizer: Localizer, replay_map: ReplayMap, duration_s: float, timings_s: dict[str, float]
 ) -> dict:
     """The metrics every laser replay reports: matching and loop-closure counts, skipped
-    messages, timings (``wall_time_s`` among them) and the map's size."""
+    messages, timings (``wall_time_s`` among them), each robot's odometry calibration and
+    the map's size."""
     diagnostics = localizer.diagnostics()
     values, spec = replay_map.values, replay_map.spec
     return {
@@ -119,6 +120,7 @@ def replay_metrics(
         "mapping_time_s": replay_map.mapping_time_s,
         "real_time_factor": duration_s / timings_s["wall_time_s"],
         "isam2_update_ms": diagnostics["isam2_update_ms"],
+        "odometry_calibration": diagnostics["odometry_calibration"],
         "map": {
             "resolution_m": spec.resolution_m,
             "rows": spec.rows,

@@ -43,6 +43,7 @@ from acslam.slam.factors import (
 )
 from acslam.slam.keyframe_scans import KeyframeScans
 from acslam.slam.landmark_association import LandmarkAssociation
+from acslam.slam.odometry_calibration import OdometryCalibration
 
 _GTSAM_ERRORS = (RuntimeError, ValueError, IndexError, KeyError)
 _POSE_CHAR_CODE = ord(keys.POSE_CHAR)
@@ -64,6 +65,7 @@ class _Robot:
     cum_distance_m: list[float] = field(default_factory=lambda: [0.0])
     # The latest iSAM2 marginal of one of this robot's keyframes: (keyframe index, 6x6).
     pose_marginal: tuple[int, np.ndarray] | None = None
+    calibration: OdometryCalibration | None = None
 
 
 def _planar_covariance(pose6_cov: np.ndarray, yaw: float) -> np.ndarray:
@@ -116,7 +118,10 @@ class SlamBackend:
         for robot_id, start in starts.items():
             start = np.asarray(start, dtype=float)
             key = keys.pose_key(int(robot_id), 0)
-            self._robots[int(robot_id)] = _Robot(int(robot_id), [key], [float("nan")])
+            calibration = OdometryCalibration(config) if config.odometry_calibration else None
+            self._robots[int(robot_id)] = _Robot(
+                int(robot_id), [key], [float("nan")], calibration=calibration
+            )
             self._graph.add(
                 gtsam.PriorFactorPose3(key, planar_to_pose3(start), prior_noise(config))
             )
@@ -145,6 +150,8 @@ class SlamBackend:
             return
         if len(robot.stamps) == 1 and robot.stamps[0] > msg.start_stamp:
             robot.stamps[0] = msg.start_stamp
+        if robot.calibration is not None:
+            msg = robot.calibration.correct(msg)
         robot.offset = compose(robot.offset, msg.delta)
         robot.distance_m += float(np.hypot(msg.dx, msg.dy))
         robot.angle_rad += abs(msg.dtheta)
@@ -169,6 +176,28 @@ class SlamBackend:
         robot.offset = np.zeros(3)
         robot.distance_m = 0.0
         robot.angle_rad = 0.0
+
+    def calibrate_odometry(
+        self,
+        robot_id: int,
+        start_s: float,
+        end_s: float,
+        relative: np.ndarray,
+        covariance: np.ndarray,
+    ) -> None:
+        """A verified scan match of the robot's sensor between two stamps, for its
+        odometry calibration (a no-op when calibration is off)."""
+        robot = self._robots[int(robot_id)]
+        if robot.calibration is not None:
+            robot.calibration.update(start_s, end_s, relative, covariance)
+
+    def odometry_calibrations(self) -> dict[int, dict[str, float | int]]:
+        """Per robot, its odometry calibration's estimate (none when calibration is off)."""
+        return {
+            robot_id: robot.calibration.summary()
+            for robot_id, robot in self._robots.items()
+            if robot.calibration is not None
+        }
 
     def add_landmarks(self, msg: LandmarkObservations) -> list[AssociationResult]:
         """See :meth:`LandmarkAssociation.add_landmarks`."""

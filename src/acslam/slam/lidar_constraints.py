@@ -24,6 +24,7 @@ from acslam.config import ScanMatchingConfig
 from acslam.geometry import between, transform_points
 from acslam.mapping.scan_matching import (
     PreparedScan,
+    ScanMatchResult,
     match_scans,
     prepare_scan,
     verify,
@@ -97,10 +98,16 @@ class LidarConstraints:
         if baseline is not None:
             partners.append((baseline, None))
         for partner, partner_scan in partners:
-            if self._constrain(slam, partner, self._entries[-1], False, partner_scan):
-                self.sequential_added += 1
-            else:
+            result = self._constrain(slam, partner, self._entries[-1], False, partner_scan)
+            if result is None:
                 self.sequential_rejected += 1
+                continue
+            self.sequential_added += 1
+            if partner is self._entries[previous]:
+                # The span of one keyframe's odometry: what calibrates it.
+                slam.calibrate_odometry(
+                    robot_id, partner.stamp_s, scan.stamp, result.relative, result.covariance
+                )
 
     def _baseline_partner(
         self, robot_id: int, keyframe: int, path_m: float
@@ -133,7 +140,10 @@ class LidarConstraints:
         )
         added = 0
         for earlier, later in pairs:
-            if self._constrain(slam, self._entries[earlier], self._entries[later], robust=True):
+            if (
+                self._constrain(slam, self._entries[earlier], self._entries[later], True)
+                is not None
+            ):
                 added += 1
             else:
                 self.loops_rejected += 1
@@ -169,9 +179,9 @@ class LidarConstraints:
         b: _KeyframeScan,
         robust: bool,
         reference: PreparedScan | None = None,
-    ) -> bool:
+    ) -> ScanMatchResult | None:
         """Match b to a (or to ``reference``, a submap in a's frame) and add the factor if
-        the match is verified."""
+        the match is verified; returns the match, or None if it was not."""
         guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
         reference = a.scan if reference is None else reference
         # A sequential guess is odometry's over a short way; a loop's has drifted.
@@ -181,12 +191,12 @@ class LidarConstraints:
             way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
             limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
         if not verify(result, guess, self.config, strict=robust, max_correction_m=limit_m):
-            return False
+            return None
         if robust:
             result = with_restart_spread(reference, b.scan, result, self.config)
             if not verify(result, guess, self.config, max_correction_m=limit_m):
-                return False
+                return None
         slam.scans.add_constraint(
             a.scan_index, b.scan_index, result.relative, result.covariance, robust
         )
-        return True
+        return result

@@ -91,6 +91,9 @@ class Isam2Localizer:
                 "tentatives_expired": backend.association.expired_tentatives,
             },
             "robot_sightings": backend.association.robot_observations,
+            "odometry_calibration": {
+                str(r): summary for r, summary in backend.odometry_calibrations().items()
+            },
             "skipped_messages": dict(backend.skipped_messages),
             "isam2_update_ms": {
                 "count": len(updates_ms),
