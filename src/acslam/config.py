@@ -322,16 +322,16 @@ class SlamConfig(StageParams):
     # map re-places its scans): half a 5 cm cell, so the map never lags by more.
     correction_threshold_m: PositiveFloat = 0.025
     # Online odometry calibration (acslam.slam.odometry_calibration): each robot's travel
-    # and turn scale errors and drift rates, learned from its sequential scan matches and
-    # taken out of its odometry. Priors and random walks default to the simulated
-    # robot's odometry (OdometryConfig: 2 % scale errors, biases of 0.005 m/s and 0.002
-    # rad/s that wander over ~30 s); for another robot state its own.
+    # and turn scale errors and travel bias, learned from its sequential scan matches and
+    # taken out of its odometry. The prior, the travel bias's level and random walk, and
+    # the turn-rate bias counted as noise default to the simulated robot's odometry
+    # (OdometryConfig: 2 % scale errors, biases of 0.005 m/s and 0.002 rad/s wandering
+    # over ~30 s); for another robot state its own.
     odometry_calibration: bool = True
     calibration_scale_prior_std: PositiveFloat = 0.05
-    calibration_travel_bias_prior_std_mps: PositiveFloat = 0.02
-    calibration_turn_bias_prior_std_radps: PositiveFloat = 0.01
+    calibration_travel_bias_std_mps: PositiveFloat = 0.005
     calibration_travel_bias_walk_mps_per_sqrt_s: NonNegativeFloat = 0.001
-    calibration_turn_bias_walk_radps_per_sqrt_s: NonNegativeFloat = 0.0005
+    calibration_turn_bias_std_radps: NonNegativeFloat = 0.002
     # Squared normalised innovation above which a match is not used (chi-square, 2 dof,
     # 99.9 %).
     calibration_gate: PositiveFloat = 13.8

@@ -1,29 +1,32 @@
-"""Online odometry calibration: each robot's wheel-odometry scale and drift rates, learned
-from its verified sequential scan matches and taken out of its increments.
+"""Online odometry calibration: each robot's wheel-odometry scale errors and travel drift,
+learned from its verified sequential scan matches and taken out of its increments.
 
 Real odometry errs systematically, not like white noise: a wheel radius off by 1 %
-stretches every distance by 1 %, and a gyro (or differential-drive yaw) bias turns the
-robot's estimate at a steady rate for tens of seconds, even at standstill (the thesis's
-own odometry model, eqs. 4.73-4.75, has both). The graph's odometry factors treat each
-keyframe's error as independent, so a systematic error is not averaged away but passed
-on: where scan matching is weak (a corridor's axis) or merely as precise as odometry, the
-estimate follows it, and on a floor plan the whole map came out rotated by 0.004-0.008
-rad or stretched by 0.3 % along its long corridors. Calibrating odometry online is the
-usual remedy (Censi et al., "Simultaneous calibration of odometry and sensor
-parameters", IEEE T-RO 2013, do it from scan matches in batch); here it is a Kalman
-filter, so each update costs the same however long the run.
+stretches every distance by 1 %, a turn-rate scale error turns every rotation by the same
+share, and a speed bias moves a robot that stands still (the thesis's own odometry model,
+eqs. 4.73-4.75, has all three, and a turn-rate bias). The graph's odometry factors treat
+each keyframe's error as independent, so a systematic error is not averaged away but
+passed on: where scan matching is weak (a corridor's axis) or merely as precise as
+odometry, the estimate follows it. On the office_c floor plan the map came out stretched
+by 0.35 % along its 70 m corridor, and on office_d a robot's heading drifted 0.03 rad.
+Calibrating odometry online is the usual remedy (Censi et al., "Simultaneous calibration
+of odometry and sensor parameters", IEEE T-RO 2013, do it from scan matches in batch);
+here it is a Kalman filter, so each update costs the same however long the run.
 
 Model, over the span between two scans of the robot (``T`` seconds, raw odometry ``u``
 and scan-matched motion ``z``, both in the first scan's frame, ``e`` the mean heading
 over the span):
 
-* turn: ``u_theta = (1 + scale_turn) z_theta + turn_bias_radps T``
 * travel along ``e``: ``e . u_xy = (1 + scale_travel) e . z_xy + travel_bias_mps T``
+* turn: ``u_theta = (1 + scale_turn) z_theta``, with the turn-rate bias's drift over
+  ``T`` counted as noise.
 
-Both are linear in the state ``[scale_travel, travel_bias_mps, scale_turn,
-turn_bias_radps]``; the biases follow a random walk, the scales are constants. An update
-whose normalised innovation exceeds the gate (a match that verification let through but
-odometry contradicts) is skipped.
+The scales are constants; the travel bias follows a random walk. The turn-rate bias is
+not estimated: wandering over tens of seconds, it would be learned from the heading of
+the same matches that enter the graph, and the corrected odometry would then repeat the
+matches' own random walk instead of checking it. An update whose normalised innovation
+exceeds the gate (a match that verification let through but odometry contradicts) is
+skipped.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ HISTORY_S = 120.0
 
 MATCH_FLOOR_M = 0.002
 MATCH_FLOOR_RAD = 0.001
-"""Least sigma of a match's travel and turn in an update, for odometry's own white noise."""
+"""Sigmas added to a match's travel and turn in an update, for odometry's white noise."""
 
 
 @dataclass
@@ -50,7 +53,7 @@ class OdometryCalibration:
     """One robot's odometry calibration and the raw odometry since ``HISTORY_S`` ago."""
 
     config: SlamConfig
-    mean: np.ndarray = field(default_factory=lambda: np.zeros(4))
+    mean: np.ndarray = field(default_factory=lambda: np.zeros(3))
     covariance: np.ndarray = field(init=False)
     updates: int = 0
     rejected: int = 0
@@ -64,9 +67,8 @@ class OdometryCalibration:
         self.covariance = np.diag(
             [
                 c.calibration_scale_prior_std**2,
-                c.calibration_travel_bias_prior_std_mps**2,
+                c.calibration_travel_bias_std_mps**2,
                 c.calibration_scale_prior_std**2,
-                c.calibration_turn_bias_prior_std_radps**2,
             ]
         )
 
@@ -82,13 +84,8 @@ class OdometryCalibration:
     def scale_turn(self) -> float:
         return float(self.mean[2])
 
-    @property
-    def turn_bias_radps(self) -> float:
-        return float(self.mean[3])
-
     def correct(self, msg: OdometryIncrement) -> OdometryIncrement:
         """Record the raw increment; return it with the current calibration taken out."""
-        duration_s = msg.stamp - msg.start_stamp
         if not self._stamps_s:
             self._stamps_s.append(msg.start_stamp)
             self._poses.append(np.zeros(3))
@@ -99,13 +96,14 @@ class OdometryCalibration:
         if msg.stamp - self._stamps_s[0] > 2.0 * HISTORY_S:
             keep = int(np.searchsorted(self._stamps_s, msg.stamp - HISTORY_S))
             del self._stamps_s[:keep], self._poses[:keep], self._turns_rad[:keep]
-        s_travel, b_travel, s_turn, b_turn = self.mean
-        dtheta = (msg.dtheta - b_turn * duration_s) / (1.0 + s_turn)
+        scale_travel, travel_bias_mps, scale_turn = self.mean
         heading = 0.5 * msg.dtheta
-        forward = b_travel * duration_s
-        dx = (msg.dx - forward * math.cos(heading)) / (1.0 + s_travel)
-        dy = (msg.dy - forward * math.sin(heading)) / (1.0 + s_travel)
-        return OdometryIncrement(msg.robot_id, msg.stamp, msg.start_stamp, dx, dy, dtheta)
+        forward_m = travel_bias_mps * (msg.stamp - msg.start_stamp)
+        dx = (msg.dx - forward_m * math.cos(heading)) / (1.0 + scale_travel)
+        dy = (msg.dy - forward_m * math.sin(heading)) / (1.0 + scale_travel)
+        return OdometryIncrement(
+            msg.robot_id, msg.stamp, msg.start_stamp, dx, dy, msg.dtheta / (1.0 + scale_turn)
+        )
 
     def update(
         self, start_s: float, end_s: float, relative: np.ndarray, covariance: np.ndarray
@@ -118,40 +116,39 @@ class OdometryCalibration:
             return False
         u, u_turn = raw
         duration_s = end_s - start_s
+        c = self.config
         if self._last_update_s is not None and end_s > self._last_update_s:
-            walk = self.config
-            self.covariance[1, 1] += walk.calibration_travel_bias_walk_mps_per_sqrt_s**2 * (
-                end_s - self._last_update_s
-            )
-            self.covariance[3, 3] += walk.calibration_turn_bias_walk_radps_per_sqrt_s**2 * (
+            self.covariance[1, 1] += c.calibration_travel_bias_walk_mps_per_sqrt_s**2 * (
                 end_s - self._last_update_s
             )
         self._last_update_s = max(end_s, self._last_update_s or end_s)
         heading = 0.5 * float(relative[2])
         along = np.array([math.cos(heading), math.sin(heading)])
-        z_along = float(along @ relative[:2])
-        design = np.array([[z_along, duration_s, 0.0, 0.0], [0.0, 0.0, relative[2], duration_s]])
-        predicted = np.array([z_along, relative[2]]) + design @ self.mean
-        innovation = np.array([along @ u[:2], u_turn]) - predicted
-        match_var = np.array(
+        z = np.array([float(along @ relative[:2]), float(relative[2])])
+        design = np.array([[z[0], duration_s, 0.0], [0.0, 0.0, z[1]]])
+        predicted = z + design @ self.mean
+        innovation = np.array([float(along @ u[:2]), u_turn]) - predicted
+        # z enters scaled by (1 + scale); the turn bias's drift over the span is noise.
+        gain_of_z = 1.0 + self.mean[[0, 2]]
+        noise = np.array(
             [
-                float(along @ covariance[:2, :2] @ along) + MATCH_FLOOR_M**2,
-                float(covariance[2, 2]) + MATCH_FLOOR_RAD**2,
+                [float(along @ covariance[:2, :2] @ along), float(along @ covariance[:2, 2])],
+                [float(along @ covariance[:2, 2]), float(covariance[2, 2])],
+            ]
+        ) * np.outer(gain_of_z, gain_of_z)
+        noise += np.diag(
+            [
+                MATCH_FLOOR_M**2,
+                (c.calibration_turn_bias_std_radps * duration_s) ** 2 + MATCH_FLOOR_RAD**2,
             ]
         )
-        # z enters both sides; its noise, scaled by (1 + scale), is the measurement noise.
-        gain_of_z = 1.0 + self.mean[[0, 2]]
-        noise = np.diag(match_var * gain_of_z**2)
-        noise[0, 1] = noise[1, 0] = float(along @ covariance[:2, 2]) * gain_of_z[0] * gain_of_z[1]
         innovation_cov = design @ self.covariance @ design.T + noise
-        if float(innovation @ np.linalg.solve(innovation_cov, innovation)) > (
-            self.config.calibration_gate
-        ):
+        if float(innovation @ np.linalg.solve(innovation_cov, innovation)) > c.calibration_gate:
             self.rejected += 1
             return False
         gain = np.linalg.solve(innovation_cov, design @ self.covariance).T
         self.mean = self.mean + gain @ innovation
-        identity_less_kh = np.eye(4) - gain @ design
+        identity_less_kh = np.eye(3) - gain @ design
         self.covariance = identity_less_kh @ self.covariance @ identity_less_kh.T
         self.covariance += gain @ noise @ gain.T
         self.updates += 1
@@ -181,11 +178,13 @@ class OdometryCalibration:
     def summary(self) -> dict[str, float | int]:
         """The estimate and its sigmas, for metrics."""
         sigmas = np.sqrt(np.diag(self.covariance))
-        names = ("scale_travel", "travel_bias_mps", "scale_turn", "turn_bias_radps")
-        out: dict[str, float | int] = {}
-        for name, value, sigma in zip(names, self.mean, sigmas, strict=True):
-            out[name] = float(value)
-            out[f"{name}_sigma"] = float(sigma)
-        out["updates"] = self.updates
-        out["rejected"] = self.rejected
-        return out
+        return {
+            "scale_travel": self.scale_travel,
+            "scale_travel_sigma": float(sigmas[0]),
+            "travel_bias_mps": self.travel_bias_mps,
+            "travel_bias_mps_sigma": float(sigmas[1]),
+            "scale_turn": self.scale_turn,
+            "scale_turn_sigma": float(sigmas[2]),
+            "updates": self.updates,
+            "rejected": self.rejected,
+        }
