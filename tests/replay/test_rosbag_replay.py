@@ -43,9 +43,7 @@ def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp
     """Two robots explore for 15 s with ``--record``'s recorder on; the bag replays in the
     batches the server received and, stopping where the run stopped (no final loop search
     and settling, which a live run never does), to the run's keyframe trajectories, to
-    5 mm and 5 mrad. Not exactly: the bag holds ranges as float32 (sensor_msgs/LaserScan),
-    so the trajectories differ by up to 0.4 mm without odometry calibration, and the
-    calibration, learned from the first 0.3 m matches, scales that up (3.5 mm)."""
+    1 mm."""
     scenario = load_scenario(tiny_scenario, robots=2)
     bag_path = tmp_path / "run.mcap"
     recorder = BagRecorder(bag_path, scenario)
@@ -86,8 +84,8 @@ def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp
         assert len(stamps) >= 10 and np.allclose(stamps, replay_stamps, atol=1e-6)
         error_m = np.hypot(*(poses[:, :2] - replay_poses[:, :2]).T)
         print(f"{name}: {len(stamps)} keyframes, max difference {error_m.max() * 1e3:.4f} mm")
-        assert error_m.max() < 5e-3
-        assert np.abs(wrap_angles(poses[:, 2] - replay_poses[:, 2])).max() < 5e-3
+        assert error_m.max() < 1e-3
+        assert np.abs(wrap_angles(poses[:, 2] - replay_poses[:, 2])).max() < 1e-3
         assert np.hypot(*np.ptp(poses[:, :2], axis=0)) > 1.0  # the robot went somewhere
 
 
