@@ -31,6 +31,7 @@ skipped.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 
@@ -94,7 +95,7 @@ class OdometryCalibration:
         self._poses.append(compose(self._poses[-1], msg.delta))
         self._turns_rad.append(self._turns_rad[-1] + msg.dtheta)
         if msg.stamp - self._stamps_s[0] > 2.0 * HISTORY_S:
-            keep = int(np.searchsorted(self._stamps_s, msg.stamp - HISTORY_S))
+            keep = bisect.bisect_left(self._stamps_s, msg.stamp - HISTORY_S)
             del self._stamps_s[:keep], self._poses[:keep], self._turns_rad[:keep]
         scale_travel, travel_bias_mps, scale_turn = self.mean
         heading = 0.5 * msg.dtheta
@@ -117,11 +118,12 @@ class OdometryCalibration:
         u, u_turn = raw
         duration_s = end_s - start_s
         c = self.config
-        if self._last_update_s is not None and end_s > self._last_update_s:
-            self.covariance[1, 1] += c.calibration_travel_bias_walk_mps_per_sqrt_s**2 * (
-                end_s - self._last_update_s
-            )
-        self._last_update_s = max(end_s, self._last_update_s or end_s)
+        if self._last_update_s is None or end_s > self._last_update_s:
+            if self._last_update_s is not None:
+                self.covariance[1, 1] += c.calibration_travel_bias_walk_mps_per_sqrt_s**2 * (
+                    end_s - self._last_update_s
+                )
+            self._last_update_s = end_s
         heading = 0.5 * float(relative[2])
         along = np.array([math.cos(heading), math.sin(heading)])
         z = np.array([float(along @ relative[:2]), float(relative[2])])
@@ -166,7 +168,7 @@ class OdometryCalibration:
         return between(a_pose, b_pose), b_turn - a_turn
 
     def _at(self, stamp_s: float) -> tuple[np.ndarray, float]:
-        i = int(np.searchsorted(self._stamps_s, stamp_s))
+        i = bisect.bisect_left(self._stamps_s, stamp_s)
         if self._stamps_s[i] == stamp_s or i == 0:
             return self._poses[i], self._turns_rad[i]
         t0, t1 = self._stamps_s[i - 1], self._stamps_s[i]
