@@ -7,8 +7,9 @@ import math
 import numpy as np
 from simtest_worlds import box_world
 
-from acslam.config import CameraConfig
+from acslam.config import CameraConfig, SlamConfig
 from acslam.sim.camera import CameraSensor
+from acslam.slam.factors import sensor_covariance
 
 # Room 8 m x 4 m, a full wall at x in [5.0, 5.05). Robot at (2, 2) looking along +x.
 POSE = (2.0, 2.0, 0.0)
@@ -78,3 +79,25 @@ def test_noise_std_matches_and_order_is_shuffled() -> None:
     errors = np.concatenate(errors)
     assert np.all(np.abs(errors.std(axis=0) / 0.05 - 1.0) < 0.1)
     assert np.all(np.abs(errors.mean(axis=0)) < 0.01)
+
+
+def test_the_default_landmark_factor_is_consistent_with_the_default_camera() -> None:
+    """The localizer's default landmark noise is the default camera's: the squared
+    Mahalanobis error of its points, at the true pose and landmark, averages the 3 of a
+    3-dof chi-square (within 3 sigma of that mean over 2,000 points). A factor sigma of
+    0.1 m, the old default, gives 0.27."""
+    camera = CameraSensor(
+        CameraConfig(), box_world(8.0, 4.0, wall_cols=(100,)), LANDMARKS, np.random.default_rng(11)
+    )
+    exact = _sensor(0.0)
+    truth, truth_ids = exact.observe(0, 0.0, POSE)
+    truth_points = truth.points[np.argsort(truth_ids)]
+    squared = []
+    for _ in range(500):
+        message, ids = camera.observe(0, 0.0, POSE)
+        for point, true_point in zip(message.points[np.argsort(ids)], truth_points, strict=True):
+            covariance = sensor_covariance(SlamConfig(), point)
+            error = point - true_point
+            squared.append(float(error @ np.linalg.solve(covariance, error)))
+    assert len(squared) == 2000
+    assert abs(np.mean(squared) - 3.0) < 3 * math.sqrt(6.0 / len(squared))
