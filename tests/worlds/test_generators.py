@@ -69,9 +69,12 @@ def cell(world: World, xy: np.ndarray) -> tuple[int, int]:
 
 
 def assert_starts_connected(world: World, min_starts: int, min_clearance_m: float) -> None:
-    """All starts lie in the free space a robot can sweep from the first one."""
+    """All starts lie in the free space a robot can sweep from the first one, and no two
+    robots standing on them overlap."""
     starts = world.default_starts
     assert starts.shape[1] == 3 and len(starts) >= min_starts
+    gaps_m = np.linalg.norm(starts[:, None, :2] - starts[None, :, :2], axis=2)
+    assert gaps_m[~np.eye(len(starts), dtype=bool)].min() > 2 * ROBOT_RADIUS_M
     reach = world.reachable_free(starts[0, 0], starts[0, 1], ROBOT_RADIUS_M)
     for pose in starts:
         assert reach[cell(world, pose)], f"start {pose} not reachable from {starts[0]}"
@@ -91,7 +94,8 @@ WORLDS: dict[str, tuple[Callable[[Callable[[str], Path]], World], int, float]] =
         0.3,
     ),
     "floorplan-lab_ipa": (lambda d: floorplan(d(f"{FLOORPLANS}/lab_ipa.png")), 3, 0.3),
-    "floorplan-office_b": (lambda d: floorplan(d(f"{FLOORPLANS}/office_b.png")), 3, 0.3),
+    # 10 robots: the floor plans' lattice beyond the first five starts.
+    "floorplan-office_b": (lambda d: floorplan(d(f"{FLOORPLANS}/office_b.png")), 10, 0.3),
 }
 
 
@@ -329,6 +333,24 @@ def test_floorplan_flips_rows_in_every_mode(mode: str, tmp_path: Path) -> None:
     assert world.free[39 - 1, 2] and world.free[39 - 15, 39]  # top image rows -> top grid rows
     assert not world.free[:24].any()
     assert_starts_connected(world, 3, 0.0)
+
+
+def test_floorplan_starts_are_the_plus_then_the_lattice_with_room(tmp_path: Path) -> None:
+    grey = np.zeros((85, 85), dtype=np.uint8)
+    grey[2:83, 2:83] = 255  # a 4.05 m square room at 0.05 m: its centre cell is the most open
+    path = tmp_path / "room.png"
+    Image.fromarray(grey, mode="L").save(path)
+    world = build_world(FloorplanWorld(generator="floorplan", file=path), seed=0)
+    starts = world.default_starts
+    assert np.allclose(starts[0, :2], [2.125, 2.125])
+    offsets = np.round((starts[:, :2] - starts[0, :2]) / 0.6).astype(int)
+    assert np.allclose(starts[:, :2] - starts[0, :2], offsets * 0.6)
+    assert offsets[:5].tolist() == [[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]]
+    # Lattice points 2 spacings out keep 2.025 - 1.2 m from the walls; 3 out, only 0.225 m.
+    assert sorted(map(tuple, offsets.tolist())) == [
+        (i, j) for i in range(-2, 3) for j in range(-2, 3)
+    ]
+    assert np.all(np.diff(np.hypot(*offsets[5:].T)) >= 0)
 
 
 # --------------------------------------------------------------------------- landmarks
