@@ -30,6 +30,7 @@ METRIC_KEYS = {
     "real_time_factor",
     "timing",
     "localization",
+    "team_alignment",
     "coverage",
     "mapping",
     "waste",

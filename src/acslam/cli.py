@@ -620,6 +620,10 @@ def print_run_summary(metrics: dict) -> None:
         area_m2 = metrics["coverage"][name]["area_m2"]
         table.add_row(escape(name), time_text, *errors, f"{area_m2:.1f}")
     _console.print(table)
+    if metrics.get("team_alignment"):
+        from acslam.eval.report import team_alignment_text
+
+        _console.print(team_alignment_text(metrics["team_alignment"]), markup=False, soft_wrap=True)
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     travelled_m = metrics["waste"]["travelled_m"]
     _console.print(

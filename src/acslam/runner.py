@@ -31,6 +31,7 @@ from acslam.eval.metrics import (
     exploration_times,
     explored_areas,
     localization_errors,
+    team_alignment,
     timing,
 )
 from acslam.eval.report import RunRecord, write_report
@@ -295,12 +296,14 @@ def _metrics(
         time_s,
     )
     localization = {}
+    scored = []
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
         # A real robot has no ground truth to be scored against, and a run shorter than a
         # keyframe has no estimate within the truth's span.
         if len(true) >= 2 and np.any((est[:, 0] >= true[0, 0]) & (est[:, 0] <= true[-1, 0])):
-            localization[name] = localization_errors(est[:, 0], est[:, 1:], true[:, 0], true[:, 1:])
+            scored.append((est[:, 0], est[:, 1:], true[:, 0], true[:, 1:]))
+            localization[name] = localization_errors(*scored[-1])
     cell_area_m2 = scenario.world.spec.resolution_m**2
     if count > 1 and all(len(true) for true in record.true_trajectories):
         true_xy = _common_clock_xy(record.true_trajectories)
@@ -328,6 +331,7 @@ def _metrics(
         "real_time_factor": time_s / max(wall_time_s, 1e-9),
         "timing": timing(dict(zip(names, done_s, strict=True))),
         "localization": localization,
+        "team_alignment": team_alignment(scored) if scored else None,
         "coverage": {
             **coverage_by_combination(
                 dict(zip(names, record.robot_known, strict=True)), cell_area_m2

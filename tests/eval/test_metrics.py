@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize
 
 from acslam.eval.metrics import (
     confusion_rates,
@@ -13,6 +14,7 @@ from acslam.eval.metrics import (
     exploration_times,
     explored_areas,
     localization_errors,
+    team_alignment,
     timing,
     waste,
 )
@@ -52,6 +54,85 @@ def test_yaw_error_wraps_across_pi() -> None:
     estimate = np.array([[0.0, 0.0, -math.pi + 0.05], [0.0, 0.0, math.pi - 0.05]])
     errors = localization_errors(stamps, estimate, stamps, truth)
     assert errors["mae_yaw_rad"] == pytest.approx(0.1)
+
+
+def _team_truth() -> list[tuple[np.ndarray, np.ndarray]]:
+    """Two robots' true trajectories (stamps, poses), 21 samples each, on different paths."""
+    stamps = np.linspace(0.0, 20.0, 21)
+    first = np.column_stack([stamps, 0.5 * np.sin(stamps / 3), np.zeros(21)])
+    second = np.column_stack([10.0 - 0.4 * stamps, 3.0 + 0.2 * stamps, np.full(21, 2.0)])
+    return [(stamps, first), (stamps, second)]
+
+
+def _turned(
+    poses: np.ndarray, angle_rad: float, centre: np.ndarray, shift: np.ndarray
+) -> np.ndarray:
+    """``poses`` turned by ``angle_rad`` about ``centre``, then moved by ``shift``."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    xy = (poses[:, :2] - centre) @ np.array([[c, s], [-s, c]]) + centre + shift
+    return np.column_stack([xy, poses[:, 2] + angle_rad])
+
+
+def test_team_alignment_undoes_a_rigid_motion_of_the_whole_team() -> None:
+    """The estimate is the truth turned 0.012 rad about (3, 4) and shifted: after the
+    alignment nothing is left, and the transform is that motion's inverse."""
+    angle, centre, shift = 0.012, np.array([3.0, 4.0]), np.array([0.05, -0.02])
+    team = [
+        (stamps, _turned(truth, angle, centre, shift), stamps, truth)
+        for stamps, truth in _team_truth()
+    ]
+    alignment = team_alignment(team)
+    assert alignment["aligned_rmse_m"] == pytest.approx(0.0, abs=1e-12)
+    assert alignment["rotation_rad"] == pytest.approx(-angle, abs=1e-12)
+    # The inverse of q = R(p - c) + c + d is p = R^-1 q + c - R^-1 (c + d).
+    c, s = math.cos(angle), math.sin(angle)
+    inverse_rotation = np.array([[c, s], [-s, c]])
+    assert alignment["translation_m"] == pytest.approx(
+        list(centre - inverse_rotation @ (centre + shift)), abs=1e-12
+    )
+    # Everything moved by the shift, and by the turn about (3, 4) in proportion to its
+    # distance from there: the mean position of the samples moves by the same.
+    samples = np.vstack([truth[:, :2] for _, truth in _team_truth()])
+    moved = _turned(np.column_stack([samples, np.zeros(len(samples))]), angle, centre, shift)
+    expected_shift_m = np.hypot(*(moved[:, :2].mean(axis=0) - samples.mean(axis=0)))
+    assert alignment["centroid_shift_m"] == pytest.approx(expected_shift_m, abs=1e-12)
+    assert localization_errors(*team[1])["rmse_m"] > 0.05  # the plain RMSE sees the turn
+
+
+def test_team_alignment_is_one_transform_for_all_robots() -> None:
+    """One robot 0.1 m east of its truth, the other 0.1 m west, on the same path: no one
+    motion of the team fixes both, so the aligned RMSE stays 0.1 m."""
+    stamps, truth = _team_truth()[0]
+    offset = np.array([0.1, 0.0, 0.0])
+    east, west = truth + offset, truth - offset
+    alignment = team_alignment([(stamps, east, stamps, truth), (stamps, west, stamps, truth)])
+    assert alignment["aligned_rmse_m"] == pytest.approx(0.1)
+    assert alignment["rotation_rad"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_team_alignment_matches_a_numerical_minimum() -> None:
+    """Noisy estimates: the closed form's RMSE and rotation equal a numerical minimisation
+    of the pooled squared error over (rotation, x, y)."""
+    rng = np.random.default_rng(5)
+    team = [
+        (stamps, _turned(truth, -0.03, np.array([1.0, 2.0]), np.array([0.2, 0.1]))
+         + rng.normal(0.0, 0.05, truth.shape), stamps, truth)
+        for stamps, truth in _team_truth()
+    ]  # fmt: skip
+    estimate = np.vstack([e[:, :2] for _, e, _, _ in team])
+    truth = np.vstack([t[:, :2] for _, _, _, t in team])
+
+    def mean_squared_m2(x: np.ndarray) -> float:
+        c, s = math.cos(x[0]), math.sin(x[0])
+        moved = estimate @ np.array([[c, s], [-s, c]]) + x[1:]
+        return float(np.mean(np.sum((moved - truth) ** 2, axis=1)))
+
+    best = minimize(mean_squared_m2, np.zeros(3), method="Nelder-Mead",
+                    options={"xatol": 1e-10, "fatol": 1e-14, "maxiter": 20000})  # fmt: skip
+    alignment = team_alignment(team)
+    assert alignment["aligned_rmse_m"] == pytest.approx(math.sqrt(best.fun), rel=1e-6)
+    assert alignment["rotation_rad"] == pytest.approx(best.x[0], abs=1e-6)
+    assert alignment["translation_m"] == pytest.approx(list(best.x[1:]), abs=1e-6)
 
 
 def test_confusion_counts_of_a_tiny_grid() -> None:

@@ -25,6 +25,7 @@ def fake_metrics(
     rmse_m: float = 0.1,
     cycle_ms: float = 20.0,
     overlap_ratio: float = 0.1,
+    aligned_rmse_m: float = 0.04,
 ) -> dict:
     names = [f"robot_{i}" for i in range(robots)]
     per_robot = {name: total_s - 2.0 * i for i, name in enumerate(names)}
@@ -49,6 +50,12 @@ def fake_metrics(
         "real_time_factor": 2.0,
         "timing": {"per_robot_s": per_robot, "total_s": total_s, "gap_s": 2.0 * (robots - 1)},
         "localization": {name: {**loc, "rmse_m": rmse_m} for name in names},
+        "team_alignment": {
+            "aligned_rmse_m": aligned_rmse_m,
+            "rotation_rad": 0.01,
+            "translation_m": [0.1, 0.0],
+            "centroid_shift_m": 0.1,
+        },
         "coverage": {**coverage, "explored_fraction_of_reachable": 0.99},
         "mapping": {"accuracy": 0.95, "tpr": 0.9, "tnr": 0.96, "fpr": 0.04, "fnr": 0.1},
         "waste": {
@@ -106,9 +113,21 @@ def sweep_dir(tmp_path: Path) -> Path:
     return make_sweep(
         tmp_path,
         [
-            ((*exp1, 0), fake_metrics(1, 150.0, area_m2=60.0, rmse_m=0.10), None),
-            ((*exp1, 1), fake_metrics(1, 160.0, area_m2=62.0, rmse_m=0.20), None),
-            ((*exp1, 2), fake_metrics(1, 170.0, area_m2=64.0, rmse_m=0.30), None),
+            (
+                (*exp1, 0),
+                fake_metrics(1, 150.0, area_m2=60.0, rmse_m=0.10, aligned_rmse_m=0.01),
+                None,
+            ),
+            (
+                (*exp1, 1),
+                fake_metrics(1, 160.0, area_m2=62.0, rmse_m=0.20, aligned_rmse_m=0.02),
+                None,
+            ),
+            (
+                (*exp1, 2),
+                fake_metrics(1, 170.0, area_m2=64.0, rmse_m=0.30, aligned_rmse_m=0.03),
+                None,
+            ),
             ((*team, 0), fake_metrics(2, 80.0, stuck=1), None),
             ((*team, 1), fake_metrics(2, 90.0, stuck=3), None),
             ((*team, 2), fake_metrics(2, 600.0, completed=False, stuck=8), None),
@@ -164,6 +183,9 @@ def test_thesis_tables_aggregate_over_seeds(sweep_dir: Path) -> None:
         text, "Experiment 1: position and orientation accuracy (thesis Table 5.2)", "1.1"
     )
     assert rmse[4] == "0.200 ± 0.100"
+    localization = text.split("### Experiment 1: position and orientation accuracy", 1)[1]
+    team = [row for row in localization.splitlines() if "| 1.1 | team, aligned |" in row]
+    assert team[0].split("|")[5].strip() == "0.020 ± 0.010"  # the RMSE column
     coverage = table_row(
         text, "Experiment 1: exploration coverage per robot combination (thesis Table 5.3)", "1.1"
     )

@@ -37,19 +37,22 @@ def interpolate_poses(
     return poses
 
 
-def _error_magnitudes(
+def _paired_poses(
     stamps: np.ndarray,
     poses: np.ndarray,
     true_stamps: np.ndarray,
     true_poses: np.ndarray,
     max_gap_s: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Position and heading error at each stamp the truth covers."""
+    """The estimated poses at the stamps the truth covers, and the truth there."""
     stamps = np.asarray(stamps, dtype=float)
     truth = interpolate_poses(stamps, true_stamps, true_poses, max_gap_s)
     covered = ~np.isnan(truth).any(axis=1)
-    estimate = np.asarray(poses, dtype=float)[covered]
-    truth = truth[covered]
+    return np.asarray(poses, dtype=float)[covered], truth[covered]
+
+
+def _error_magnitudes(estimate: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Position and heading error of each pair of :func:`_paired_poses`."""
     distance = np.hypot(*(estimate[:, :2] - truth[:, :2]).T)
     yaw = np.abs(wrap_angles(estimate[:, 2] - truth[:, 2]))
     return distance, yaw
@@ -84,7 +87,8 @@ def localization_errors(
     Euclidean distance, heading error the wrapped absolute difference. ``std`` is the
     standard deviation of the error magnitudes.
     """
-    return _summary(*_error_magnitudes(stamps, poses, true_stamps, true_poses, max_gap_s))
+    paired = _paired_poses(stamps, poses, true_stamps, true_poses, max_gap_s)
+    return _summary(*_error_magnitudes(*paired))
 
 
 def pooled_localization_errors(
@@ -94,8 +98,51 @@ def pooled_localization_errors(
     """:func:`localization_errors` over the samples of several robots' trajectories
     together, each ``(stamps, poses, true_stamps, true_poses)``; ``final_*`` is the last
     robot's."""
-    parts = [_error_magnitudes(*trajectory, max_gap_s) for trajectory in trajectories]
+    parts = [
+        _error_magnitudes(*_paired_poses(*trajectory, max_gap_s)) for trajectory in trajectories
+    ]
     return _summary(np.concatenate([d for d, _ in parts]), np.concatenate([y for _, y in parts]))
+
+
+def team_alignment(
+    trajectories: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    max_gap_s: float = math.inf,
+) -> dict[str, float | list[float]]:
+    """The one rigid motion that best lays the whole team's estimated positions onto the
+    truth, and the position RMSE after it; each trajectory ``(stamps, poses, true_stamps,
+    true_poses)`` as for :func:`localization_errors`.
+
+    With known start poses the estimate lives in the truth's frame, and the plain RMSE
+    counts a rotation of the whole map about the starts (heading error made on the way out
+    of the start area, which robots that never come back cannot undo) the same as a map
+    that is wrong inside. After the alignment only the latter remains: evo's ``--align``
+    without scale (Umeyama 1991), but one transform for all robots, since a per-robot
+    alignment would hide how they disagree. In 2D the least-squares rotation has a closed
+    form: theta = atan2(sum a x b, sum a . b) over the centred positions. Returns the RMSE
+    (m), the rotation (rad) and the translation (m) that take the estimate onto the truth
+    (rotation about the frame's origin first), and how far the team's mean position moves
+    (m), which unlike the translation does not grow with the map's distance from the origin.
+    """
+    pairs = [_paired_poses(*trajectory, max_gap_s) for trajectory in trajectories]
+    estimate = np.concatenate([e[:, :2] for e, _ in pairs])
+    truth = np.concatenate([t[:, :2] for _, t in pairs])
+    if not len(estimate):
+        raise ValueError("the estimated trajectories do not overlap the ground truth in time")
+    estimate_mean, truth_mean = estimate.mean(axis=0), truth.mean(axis=0)
+    a, b = estimate - estimate_mean, truth - truth_mean
+    rotation_rad = math.atan2(
+        float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b))
+    )
+    c, s = math.cos(rotation_rad), math.sin(rotation_rad)
+    rotated = a @ np.array([[c, s], [-s, c]])
+    rmse_m = float(np.sqrt(np.mean(np.sum((rotated - b) ** 2, axis=1))))
+    translation_m = truth_mean - np.array([[c, -s], [s, c]]) @ estimate_mean
+    return {
+        "aligned_rmse_m": rmse_m,
+        "rotation_rad": rotation_rad,
+        "translation_m": [float(v) for v in translation_m],
+        "centroid_shift_m": float(np.hypot(*(truth_mean - estimate_mean))),
+    }
 
 
 def confusion_rates(true_occupied: np.ndarray, estimated_values: np.ndarray) -> dict[str, float]:

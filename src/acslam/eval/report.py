@@ -519,7 +519,23 @@ def _localization_table(metrics: dict) -> str:
             "Not scored (no ground truth, or no estimate within its time yet: a run that "
             f"ended before the robot's first keyframe): {', '.join(unscored)}."
         )
+    alignment = metrics.get("team_alignment")  # absent from runs written before it
+    if alignment:
+        table += _note(team_alignment_text(alignment))
     return table
+
+
+def team_alignment_text(alignment: dict) -> str:
+    """One sentence on metrics.json's ``team_alignment``: what is left of the position
+    error once the whole team's map is laid onto the truth by one rigid motion."""
+    return (
+        f"After the one rigid motion that best lays all robots' trajectories onto the truth "
+        f"(a turn of {1000 * alignment['rotation_rad']:+.1f} mrad, the team's mean position "
+        f"moved {alignment['centroid_shift_m']:.3f} m), the team's position RMSE is "
+        f"{alignment['aligned_rmse_m']:.3f} m: "
+        "the rest of the RMSE above is the whole map turned or shifted against the start "
+        "frame, not error inside it."
+    )
 
 
 def _combination_rows(coverage: dict) -> list[tuple[str, dict]]:
