@@ -12,7 +12,7 @@ from itertools import combinations
 
 import numpy as np
 
-from acslam.geometry import path_length_m, wrap_angles
+from acslam.geometry import path_length_m, transform_points, wrap_angles
 from acslam.grid import OCCUPIED, UNKNOWN
 
 
@@ -133,14 +133,13 @@ def team_alignment(
     rotation_rad = math.atan2(
         float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b))
     )
-    c, s = math.cos(rotation_rad), math.sin(rotation_rad)
-    rotated = a @ np.array([[c, s], [-s, c]])
-    rmse_m = float(np.sqrt(np.mean(np.sum((rotated - b) ** 2, axis=1))))
-    translation_m = truth_mean - np.array([[c, -s], [s, c]]) @ estimate_mean
+    turned_mean = transform_points(np.array([0.0, 0.0, rotation_rad]), estimate_mean[None])[0]
+    motion = np.array([*(truth_mean - turned_mean), rotation_rad])
+    aligned = transform_points(motion, estimate)
     return {
-        "aligned_rmse_m": rmse_m,
+        "aligned_rmse_m": float(np.sqrt(np.mean(np.sum((aligned - truth) ** 2, axis=1)))),
         "rotation_rad": rotation_rad,
-        "translation_m": [float(v) for v in translation_m],
+        "translation_m": [float(v) for v in motion[:2]],
         "centroid_shift_m": float(np.hypot(*(truth_mean - estimate_mean))),
     }
 
