@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -126,6 +127,24 @@ def test_targets_next_to_the_robot_and_lethal_targets() -> None:
     exact = exact_costs(lethal, starts, targets)
     np.testing.assert_allclose(approx[:, :2], exact[:, :2], rtol=1e-12)  # fine in the box
     assert approx[0, 2] == np.inf == exact[0, 2]
+
+
+def test_the_searches_give_the_same_costs_on_any_number_of_threads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The robots' searches run in lanes on threads, each with its own workspace: one
+    thread or several, the costs are the same to the bit."""
+    rng = np.random.default_rng(4)
+    lethal = rooms_map(rng)
+    starts, targets = free_cells(lethal, rng, 7), free_cells(lethal, rng, 30)
+    costs = {}
+    for threads in (1, 3, 8):
+        monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", threads)
+        costs[threads] = graph_costs(lethal, starts, targets, 4)
+    np.testing.assert_array_equal(costs[3], costs[1])
+    np.testing.assert_array_equal(costs[8], costs[1])
+    assert np.isfinite(costs[1]).sum() > len(starts)
+    np.testing.assert_allclose(costs[1], exact_costs(lethal, starts, targets), atol=8 * RES_M)
 
 
 GRAPH_ARRAYS = ("node_cells", "block_nodes", "offsets", "neighbours", "costs")

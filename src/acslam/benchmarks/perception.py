@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from functools import partial
 
+import numba
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -429,7 +430,8 @@ def bench_travel_distances(quick: bool) -> list[Figure]:
     Twice: with a fresh graph (the first replan, or a window that grew), and at a replan
     after a map update, where the allocator's builder relabels only the blocks that
     changed. The update: an obstacle 0.5 m across appears 1.25 m from each robot, and
-    the next one clears them again."""
+    the next one clears them again. The replan once more on one thread: the robots'
+    searches run on up to ``NUMBA_NUM_THREADS`` threads."""
     size_m, robots = (50.0, 3) if quick else (100.0, 10)
     world = build_world(
         DungeonWorld(generator="dungeon", width_m=size_m, height_m=size_m, room_count=int(size_m)),
@@ -461,6 +463,17 @@ def bench_travel_distances(quick: bool) -> list[Figure]:
     relative = np.abs(approx - exact)[reachable] / np.maximum(exact[reachable], 1e-9)
     builder = TravelGraphBuilder()
     costmaps = iter([updated, costmap] * 10**6)
+
+    def replan() -> None:
+        cluster_distances_m(cells, clusters, next(costmaps), graph_params, builder)
+
+    threads = numba.config.NUMBA_NUM_THREADS
+    replan_ms = median_ms(replan, 6)
+    numba.config.NUMBA_NUM_THREADS = 1
+    try:
+        one_thread_ms = median_ms(replan, 6)
+    finally:
+        numba.config.NUMBA_NUM_THREADS = threads
     exact_ms = median_ms(partial(cluster_distances_m, cells, clusters, costmap, exact_params), 1)
     setup = f"{robots} robots x 50 clusters, {spec.rows}x{spec.cols}"
     goal = "goal <= 20 ms at 10 robots, 2000x2000"
@@ -477,11 +490,18 @@ def bench_travel_distances(quick: bool) -> list[Figure]:
         ),
         Figure(
             "exploration",
-            f"allocation distances, travel graph, replan after a map update, {setup}",
-            median_ms(
-                lambda: cluster_distances_m(cells, clusters, next(costmaps), graph_params, builder),
-                6,
-            ),
+            f"allocation distances, travel graph, replan after a map update, {setup}, "
+            f"{threads} threads",
+            replan_ms,
+            "ms",
+            "one exact Dijkstra per robot",
+            exact_ms,
+            goal,
+        ),
+        Figure(
+            "exploration",
+            f"allocation distances, travel graph, replan after a map update, {setup}, 1 thread",
+            one_thread_ms,
             "ms",
             "one exact Dijkstra per robot",
             exact_ms,

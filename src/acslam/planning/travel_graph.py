@@ -20,9 +20,10 @@ Between replans a map update changes a few rooms, not the building: a
 blocks whose lethal cells changed (and the edges that touch them), to the bit the graph a
 fresh build gives.
 
-The coarse search is one Dijkstra per robot with a bucket queue (:func:`_distances_to_legs`),
-seeded with the fine costs of the robot's box nodes and stopped once every node next to a
-target is final.
+The coarse search is one Dijkstra per robot with a bucket queue (:func:`_search`), seeded
+with the fine costs of the robot's box nodes and stopped once every node next to a target
+is final. The robots' searches are independent and run side by side on up to
+``NUMBA_NUM_THREADS`` threads, with the same result on any count.
 Larger blocks search faster but cost accuracy: on the IPA floor plans, 0.2 m blocks keep
 95 % of robot-target lengths within 1.6 % of the exact ones, 0.5 m blocks within 3.6 %,
 with single short paths up to 19 % off.
@@ -31,7 +32,9 @@ with single short paths up to 19 % off.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 
 import numba
 import numpy as np
@@ -65,8 +68,9 @@ class TravelGraph:
 
 @numba.njit(cache=True)
 def _changed_blocks(lethal: np.ndarray, previous: np.ndarray, k: int) -> np.ndarray:
-    """Per block, whether any of its cells' lethal flag differs from ``previous``. Compares
-    eight cells at a time: a map update changes a few rooms, so almost every word is equal."""
+    """Per block, whether any of its cells' lethal flag differs from ``previous``, which it
+    brings up to date. Compares eight cells at a time: a map update changes a few rooms,
+    so almost every word is equal (and nothing else of the window is copied)."""
     rows, cols = lethal.shape
     block_cols = (cols + k - 1) // k
     changed = np.zeros(((rows + k - 1) // k) * block_cols, dtype=np.bool_)
@@ -78,6 +82,7 @@ def _changed_blocks(lethal: np.ndarray, previous: np.ndarray, k: int) -> np.ndar
             continue
         for cell in range(8 * w, min(8 * w + 8, len(new))):
             if new[cell] != old[cell]:
+                old[cell] = new[cell]
                 r = cell // cols
                 changed[(r // k) * block_cols + (cell - r * cols) // k] = True
     return changed
@@ -363,7 +368,6 @@ class TravelGraphBuilder:
             changed = np.ones(blocks, dtype=np.bool_)
         else:
             changed = _changed_blocks(lethal, previous, k)
-            np.copyto(previous, lethal)
         _label_blocks(lethal, k, changed, self._label, self._counts, self._reps)
         starts = np.zeros(blocks + 1, dtype=np.int64)
         np.cumsum(self._counts, out=starts[1:])
@@ -456,86 +460,149 @@ def _box_searches(
 
 
 @numba.njit(cache=True)
-def _distances_to_legs(
+def _search(
+    offsets: np.ndarray,
+    neighbours: np.ndarray,
+    costs: np.ndarray,
+    seeds: np.ndarray,
+    seed_costs: np.ndarray,
+    is_leg: np.ndarray,
+    per_width: float,
+    head: np.ndarray,
+    entry_node: np.ndarray,
+    entry_next: np.ndarray,
+    cost_to: np.ndarray,
+    final: np.ndarray,
+) -> None:
+    """One Dijkstra from ``seeds`` at ``seed_costs`` into ``cost_to`` and ``final`` (the
+    rest is workspace, its contents ignored), until every leg node is final.
+
+    The queue is Dinitz's: buckets as wide as the cheapest edge (``1 / per_width``), in a
+    ring of ``len(head)`` (a power of two that covers the dearest edge and the seeds'
+    spread). Relaxing a node of the current bucket only reaches later buckets, so every
+    node of a bucket is final and the bucket needs no order. The buckets' entries are
+    linked lists: one entry per seed and per improving relaxation."""
+    mask = len(head) - 1
+    cost_to[:] = np.inf
+    final[:] = False
+    head[:] = -1
+    used = pending = 0
+    bucket = np.iinfo(np.int64).max
+    for e in range(len(seeds)):
+        v, g = seeds[e], seed_costs[e]
+        if g < cost_to[v]:
+            cost_to[v] = g
+            seed_bucket = int(g * per_width)
+            bucket = min(bucket, seed_bucket)
+            slot = seed_bucket & mask  # a power of two: slots by mask, not by a slow modulo
+            entry_node[used], entry_next[used], head[slot] = v, head[slot], used
+            used += 1
+            pending += 1
+    legs_left = int(is_leg.sum())
+    while pending > 0 and legs_left > 0:
+        slot = bucket & mask
+        while head[slot] >= 0:  # a relaxation may land here again by rounding
+            e = head[slot]
+            head[slot] = entry_next[e]
+            pending -= 1
+            u = entry_node[e]
+            if final[u]:
+                continue
+            final[u] = True
+            legs_left -= is_leg[u]
+            for j in range(offsets[u], offsets[u + 1]):
+                v = neighbours[j]
+                g = cost_to[u] + costs[j]
+                if g < cost_to[v]:
+                    cost_to[v] = g
+                    to_slot = int(g * per_width) & mask
+                    entry_node[used], entry_next[used], head[to_slot] = v, head[to_slot], used
+                    used += 1
+                    pending += 1
+        bucket += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _lane_searches(
     offsets: np.ndarray,
     neighbours: np.ndarray,
     costs: np.ndarray,
     seed_offsets: np.ndarray,
     seeds: np.ndarray,
     seed_costs: np.ndarray,
+    is_leg: np.ndarray,
     leg_nodes: np.ndarray,
-) -> np.ndarray:
-    """(starts, len(leg_nodes)) graph cost from each start to each leg node: one Dijkstra
-    per start, from its box nodes ``seeds[seed_offsets[i]:seed_offsets[i + 1]]`` at their
-    fine costs ``seed_costs``.
-
-    The queue is Dinitz's: buckets as wide as the cheapest edge. Relaxing a node of the
-    current bucket only reaches later buckets, so every node of a bucket is final and the
-    bucket needs no order. A search stops once every leg node is final."""
+    per_width: float,
+    buckets: int,
+    lane: int,
+    lanes: int,
+    result: np.ndarray,
+) -> None:
+    """The searches of one lane: starts ``lane``, ``lane + lanes``, ... into their rows of
+    ``result``, with one workspace for all of them. Without the GIL, so lanes run on
+    threads side by side."""
     nodes = len(offsets) - 1
-    result = np.full((len(seed_offsets) - 1, len(leg_nodes)), np.inf)
-    finite_seeds = seed_costs[np.isfinite(seed_costs)]
-    if len(finite_seeds) == 0 or len(leg_nodes) == 0:
-        return result
-    width = costs.min() if len(costs) > 0 else 1.0
-    per_width = 1.0 / width
-    # A ring of buckets: pending costs never spread over more than the dearest edge, or
-    # than the seeds' spread at the start.
-    spread = max(costs.max() if len(costs) > 0 else 0.0, finite_seeds.max() - finite_seeds.min())
-    buckets = 2
-    while buckets < int(spread * per_width) + 2:
-        buckets *= 2  # a power of two: slots by mask, not by a (slow) modulo
-    mask = buckets - 1
-    is_leg = np.zeros(nodes, dtype=np.bool_)
-    is_leg[leg_nodes] = True
-    leg_count = int(is_leg.sum())
-    cost_to = np.empty(nodes)
-    final = np.empty(nodes, dtype=np.bool_)
     head = np.empty(buckets, dtype=np.int32)
-    # The buckets' entries as linked lists: one per seed and per improving relaxation.
     entry_node = np.empty(len(neighbours) + len(seeds), dtype=np.int32)
     entry_next = np.empty(len(neighbours) + len(seeds), dtype=np.int32)
-    for s in range(len(seed_offsets) - 1):
-        cost_to[:] = np.inf
-        final[:] = False
-        head[:] = -1
-        used = pending = 0
-        bucket = np.iinfo(np.int64).max
-        for e in range(seed_offsets[s], seed_offsets[s + 1]):
-            v, g = seeds[e], seed_costs[e]
-            if g < cost_to[v]:
-                cost_to[v] = g
-                seed_bucket = int(g * per_width)
-                bucket = min(bucket, seed_bucket)
-                slot = seed_bucket & mask
-                entry_node[used], entry_next[used], head[slot] = v, head[slot], used
-                used += 1
-                pending += 1
-        legs_left = leg_count
-        while pending > 0 and legs_left > 0:
-            slot = bucket & mask
-            while head[slot] >= 0:  # a relaxation may land here again by rounding
-                e = head[slot]
-                head[slot] = entry_next[e]
-                pending -= 1
-                u = entry_node[e]
-                if final[u]:
-                    continue
-                final[u] = True
-                legs_left -= is_leg[u]
-                for j in range(offsets[u], offsets[u + 1]):
-                    v = neighbours[j]
-                    g = cost_to[u] + costs[j]
-                    if g < cost_to[v]:
-                        cost_to[v] = g
-                        to_slot = int(g * per_width) & mask
-                        entry_node[used], entry_next[used], head[to_slot] = v, head[to_slot], used
-                        used += 1
-                        pending += 1
-            bucket += 1
+    cost_to = np.empty(nodes)
+    final = np.empty(nodes, dtype=np.bool_)
+    for s in range(lane, len(seed_offsets) - 1, lanes):
+        first, last = seed_offsets[s], seed_offsets[s + 1]
+        _search(
+            offsets, neighbours, costs, seeds[first:last], seed_costs[first:last], is_leg,
+            per_width, head, entry_node, entry_next, cost_to, final,
+        )  # fmt: skip
         for j in range(len(leg_nodes)):
             if final[leg_nodes[j]]:
                 result[s, j] = cost_to[leg_nodes[j]]
+
+
+def _distances_to_legs(
+    graph: TravelGraph,
+    seed_offsets: np.ndarray,
+    seeds: np.ndarray,
+    seed_costs: np.ndarray,
+    leg_nodes: np.ndarray,
+) -> np.ndarray:
+    """(starts, len(leg_nodes)) graph cost from each start to each leg node: one
+    :func:`_search` per start, from its box nodes ``seeds[seed_offsets[i]:seed_offsets[i +
+    1]]`` at their fine costs ``seed_costs``.
+
+    The searches are independent: they run in lanes, one per thread up to
+    ``NUMBA_NUM_THREADS`` (numba's thread count, by default the machine's cores). Python
+    threads that wait asleep rather than numba's parallel loops, whose OpenMP workers spin
+    between loops and so slow everything else where the cores are shared. The result does
+    not depend on the lanes."""
+    searches = len(seed_offsets) - 1
+    result = np.full((searches, len(leg_nodes)), np.inf)
+    finite_seeds = seed_costs[np.isfinite(seed_costs)]
+    if len(finite_seeds) == 0 or len(leg_nodes) == 0:
+        return result
+    costs = graph.costs
+    per_width = 1.0 / (costs.min() if len(costs) > 0 else 1.0)
+    # Pending costs never spread over more than the dearest edge, or than the seeds'
+    # spread at the start.
+    spread = max(costs.max() if len(costs) > 0 else 0.0, finite_seeds.max() - finite_seeds.min())
+    buckets = 2
+    while buckets < int(spread * per_width) + 2:
+        buckets *= 2
+    is_leg = np.zeros(graph.node_count, dtype=np.bool_)
+    is_leg[leg_nodes] = True
+    lanes = max(1, min(numba.config.NUMBA_NUM_THREADS, searches))
+    search = partial(
+        _lane_searches, graph.offsets, graph.neighbours, costs, seed_offsets, seeds,
+        seed_costs, is_leg, leg_nodes, per_width, buckets,
+    )  # fmt: skip
+    # Positional arguments only: called with keywords, the lanes ran no faster than one.
+    if lanes == 1:
+        search(0, 1, result)
+        return result
+    with ThreadPoolExecutor(lanes - 1) as pool:
+        others = [pool.submit(search, lane, lanes, result) for lane in range(1, lanes)]
+        search(0, lanes, result)
+        for lane in others:
+            lane.result()
     return result
 
 
@@ -580,8 +647,6 @@ def travel_costs(
     seed_offsets, seeds, seed_costs, result = _box_searches(
         cost, cost_weight, lethal, starts, targets, *boxes
     )
-    to_legs = _distances_to_legs(
-        graph.offsets, graph.neighbours, graph.costs, seed_offsets, seeds, seed_costs, leg_nodes
-    )
+    to_legs = _distances_to_legs(graph, seed_offsets, seeds, seed_costs, leg_nodes)
     _join_legs(to_legs, result, leg_offsets, leg_costs)
     return result
