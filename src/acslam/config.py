@@ -424,9 +424,12 @@ class ServerConfig(Section):
     map_update_period_s: PositiveFloat = 0.5
     # A robot within this path length of its frontier target has reached it.
     goal_tolerance_m: PositiveFloat = 0.3
-    # Beams ending within robot radius + this margin of another robot are dropped before
-    # mapping: robots are not walls.
-    robot_filter_margin_m: NonNegativeFloat = 0.15
+    # Beams ending within robot radius + this margin of another robot's estimate are
+    # dropped before mapping and matching: robots are not walls. The margin covers the two
+    # robots' relative error: with 0.15 m, ten robots leaving one room fed each other's
+    # returns into their matches once they were 0.15 m off, and the map came apart; with
+    # 0.5 m, the thesis labs lost wall returns near teammates at the start.
+    robot_filter_margin_m: NonNegativeFloat = 0.3
     # Costmap and planning use the known area's bounding box grown by this margin.
     window_margin_m: PositiveFloat = 1.0
     # Exploration is over when no robot has had a reachable frontier for this long.

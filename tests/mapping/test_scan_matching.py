@@ -12,16 +12,19 @@ import pytest
 
 from acslam.config import LidarConfig, ScanMatchingConfig
 from acslam.datasets.carmen import read_carmen
-from acslam.geometry import between, compose, wrap_angle
+from acslam.geometry import between, compose, transform_points, wrap_angle
 from acslam.grid import GridSpec
 from acslam.mapping.scan_matching import (
     PreparedScan,
     ScanMatchResult,
+    _behind_blind_sectors,
     match_scans,
     prepare_scan,
     verify,
     with_restart_spread,
 )
+from acslam.messages import LidarScan
+from acslam.pipeline.perception import blind_sectors
 from acslam.sim.lidar import LidarSensor
 from acslam.slam.loop_candidates import LoopCandidates
 from acslam.worlds.world import World
@@ -442,3 +445,60 @@ def test_intel_scan_to_scan_chain_agrees_with_odometry_locally(
     errors = np.array(increment_errors)
     assert np.mean(errors[:, 2] < math.radians(2.0)) >= 0.95
     assert np.median(np.hypot(errors[:, 0], errors[:, 1])) < 0.03
+
+
+def _crowded_pair(seed: int) -> tuple[LidarScan, np.ndarray, np.ndarray, PreparedScan, np.ndarray]:
+    """Scan A with four teammates 0.4 m around it (a third of its beams end on them), the
+    teammates' centres in A's frame, which of A's beams they blocked, scan B 0.25 m on
+    with none in view, and B's true pose in A's frame."""
+    rng = np.random.default_rng(seed)
+    world = random_room(rng)
+    pose_a = free_pose(world, rng, clearance_m=0.8)
+    pose_b = compose(pose_a, np.array([0.25, 0.05, 0.05]))
+    bearings = np.array([0.0, 1.2, 2.6, -1.5])
+    centres_in_a = 0.4 * np.column_stack([np.cos(bearings), np.sin(bearings)])
+    discs = np.column_stack([transform_points(pose_a, centres_in_a), np.full(4, 0.105)])
+    seen = LidarSensor(LidarConfig(), world, rng).scan(0, 0.0, tuple(pose_a), discs, -1)
+    clear = LidarSensor(LidarConfig(), world, rng).scan(0, 0.0, tuple(pose_a), NO_DISCS, -1)
+    blocked = seen.ranges < clear.ranges - 0.2
+    scan_b = LidarSensor(LidarConfig(), world, rng).scan(0, 0.0, tuple(pose_b), NO_DISCS, -1)
+    query = prepare_scan(scan_b.angles, scan_b.ranges, NOISY)
+    return seen, centres_in_a, blocked, query, between(pose_a, pose_b)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_points_behind_teammates_do_not_count_against_a_match(seed: int) -> None:
+    """The inlier ratio counts only B's points that A could have seen: with A's blind
+    sectors it rises well above the 0.6 that verification asks (measured 0.77-0.94),
+    where without them 4 of these 6 pairs fall below it; the pose is the same."""
+    seen, _, blocked, query, truth = _crowded_pair(seed)
+    kept = ~blocked
+    guess = compose(truth, np.array([0.03, -0.02, 0.01]))
+    plain = prepare_scan(seen.angles[kept], seen.ranges[kept], NOISY)
+    aware = prepare_scan(
+        seen.angles[kept], seen.ranges[kept], NOISY,
+        blind_sectors(seen.angles, seen.ranges, blocked),
+    )  # fmt: skip
+    without = match_scans(plain, query, guess, NOISY, guess_from_odometry=True)
+    result = match_scans(aware, query, guess, NOISY, guess_from_odometry=True)
+    assert result.inlier_ratio >= without.inlier_ratio + 0.15
+    assert verify(result, guess, NOISY, strict=False)
+    np.testing.assert_array_equal(result.relative, without.relative)
+    error = pose_error(result.relative, truth)
+    assert np.hypot(error[0], error[1]) < 0.03 and abs(error[2]) < 0.01
+
+
+def test_blind_sectors_hide_what_the_teammates_shadow() -> None:
+    """Against ray-disc intersection: a point of B (at its true pose in A's frame) is
+    hidden from A when the segment from A to it crosses a teammate. The sectors agree on
+    98 % of the points or more: they differ only at a shadow's edge, within half a beam."""
+    seen, centres_in_a, blocked, query, truth = _crowded_pair(0)
+    points = transform_points(truth, query.points_m)
+    along = np.clip(
+        (points @ centres_in_a.T) / np.sum(points**2, axis=1)[:, None], 0.0, 1.0
+    )  # the nearest point of each segment to each centre, as a fraction of the segment
+    gaps = np.linalg.norm(along[:, :, None] * points[:, None, :] - centres_in_a[None, :, :], axis=2)
+    crossing = np.any(gaps < 0.105, axis=1)
+    hidden = _behind_blind_sectors(points, blind_sectors(seen.angles, seen.ranges, blocked))
+    assert 0.2 < crossing.mean() < 0.5
+    assert np.mean(hidden == crossing) >= 0.98

@@ -34,6 +34,9 @@ Design:
 - Robustness: a metric gate on the correspondence distance shrinks over the iterations
   (large at first so a wrong initial guess is pulled in, small later to cut outliers),
   and Huber weights on the residual whitened by the sensor noise model.
+- Teammates' shadows: the server drops the beams that end on other robots and keeps where
+  they were as the scan's blind sectors; the inlier ratio that verification tests counts
+  only the points of B that A could have seen (:func:`_visible_inlier_ratio`).
 - Covariance (Censi 2007, "An accurate closed-form estimate of ICP's covariance"): the
   first-order propagation of the range and bearing noise of every beam of *both* scans
   through the weighted least-squares solution, H^-1 M H^-1 (a reference beam enters all
@@ -49,14 +52,14 @@ i.e. ``geometry.between(pose_a, pose_b)`` for sensor poses in the world.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between, wrap_angle
+from acslam.geometry import between, transform_points, wrap_angle
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,6 +74,8 @@ class PreparedScan:
     offset along the normal (summing to 1); ``line_ok`` is False where the neighbourhood
     is not a line, ``line_variance_m2`` the surface point's variance along the normal and
     ``line_normal_variance_rad2`` the variance of the normal's direction.
+    ``blind_sectors`` (K, 3) ``[from_rad, to_rad, range_m]``: bearings where a teammate
+    blocked the view, and the range it blocked from; beyond it the scan saw nothing.
     """
 
     points_m: np.ndarray
@@ -85,6 +90,7 @@ class PreparedScan:
     line_variance_m2: np.ndarray
     line_curvature: np.ndarray
     line_normal_variance_rad2: np.ndarray
+    blind_sectors: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass(frozen=True)
@@ -122,10 +128,15 @@ def _beam_sigmas_m(ranges_m: np.ndarray, config: ScanMatchingConfig) -> tuple[np
 
 
 def prepare_scan(
-    angles_rad: np.ndarray, ranges_m: np.ndarray, config: ScanMatchingConfig
+    angles_rad: np.ndarray,
+    ranges_m: np.ndarray,
+    config: ScanMatchingConfig,
+    blind_sectors: np.ndarray | None = None,
 ) -> PreparedScan:
     """Points, KD-tree and neighbourhood lines of a scan; ``inf``/non-finite ranges dropped,
-    and of the returns in one ``config.voxel_filter_m`` cell only the first kept."""
+    and of the returns in one ``config.voxel_filter_m`` cell only the first kept.
+    ``blind_sectors``: where teammates blocked the view (:class:`PreparedScan`)."""
+    blind = np.zeros((0, 3)) if blind_sectors is None else np.asarray(blind_sectors, float)
     angles_rad = np.asarray(angles_rad, dtype=float)
     ranges_m = np.asarray(ranges_m, dtype=float)
     valid = np.isfinite(ranges_m) & (ranges_m > 0.0)
@@ -146,7 +157,7 @@ def prepare_scan(
             points, ranges, directions, tree, empty, empty,
             np.zeros((len(points), max(k, 1)), dtype=np.int64),
             np.zeros((len(points), max(k, 1))), np.zeros(len(points), dtype=bool), none, none,
-            none,
+            none, blind,
         )  # fmt: skip
     distances, neighbors = tree.query(points, k=k)
     local = points[neighbors]
@@ -177,7 +188,7 @@ def prepare_scan(
     normal_variance = np.sum(slope_weights**2 * variance, axis=1)
     return PreparedScan(
         points, ranges, directions, tree, anchors, normals, neighbors, weights, line_ok,
-        line_variance, curvature, normal_variance,
+        line_variance, curvature, normal_variance, blind,
     )  # fmt: skip
 
 
@@ -514,11 +525,41 @@ def match_scans(
     return ScanMatchResult(
         relative=pose,
         covariance=covariance,
-        inlier_ratio=inlier_count / len(query.points_m),
+        inlier_ratio=_visible_inlier_ratio(pose, reference, query, inlier_count, inliers),
         rms_residual_m=rms,
         iterations=iterations,
         converged=converged,
     )
+
+
+def _visible_inlier_ratio(
+    pose: np.ndarray,
+    reference: PreparedScan,
+    query: PreparedScan,
+    inlier_count: int,
+    inliers: np.ndarray,
+) -> float:
+    """The share of B's points that fit A, counting only points A could have seen: a
+    point behind a teammate that blocked A's view has nothing in A to fit. In a crowded
+    team a quarter of each scan can be teammates, whose shadows differ between two scans;
+    counted, they fail sequential matches that fit well where both scans saw."""
+    count = len(query.points_m)
+    if len(reference.blind_sectors) == 0:
+        return inlier_count / count
+    hidden = _behind_blind_sectors(transform_points(pose, query.points_m), reference.blind_sectors)
+    seen = count - int(np.count_nonzero(hidden))
+    if seen == 0:
+        return 0.0
+    return (inlier_count - int(np.count_nonzero(inliers & hidden))) / seen
+
+
+def _behind_blind_sectors(points_m: np.ndarray, sectors: np.ndarray) -> np.ndarray:
+    """Per point (sensor frame), whether it lies in a blind sector beyond its range."""
+    bearing = np.arctan2(points_m[:, 1], points_m[:, 0])[:, None]
+    distance_m = np.hypot(points_m[:, 0], points_m[:, 1])[:, None]
+    offset = wrap_angle(bearing - sectors[None, :, 0])
+    width = sectors[None, :, 1] - sectors[None, :, 0]
+    return np.any((offset >= 0.0) & (offset <= width) & (distance_m > sectors[None, :, 2]), axis=1)
 
 
 def _without_untrusted_axis_information(

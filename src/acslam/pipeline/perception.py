@@ -20,11 +20,13 @@ from acslam.pipeline.stages import AssociationResult, Localizer
 
 @dataclass(frozen=True)
 class KeptScan:
-    """A scan the localizer kept: its index, the scan as received, and its mappable beams."""
+    """A scan the localizer kept: its index, the scan as received, its mappable beams, and
+    where teammates blocked its view (:func:`blind_sectors`)."""
 
     index: int
     received: LidarScan
     mappable: LidarScan
+    blind_sectors: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -41,7 +43,9 @@ class Perception:
 
     A beam that ends within ``robot_reach_m`` of another robot's estimated position is
     dropped before mapping and matching: robots are not walls, and their returns would
-    stay in the map after they moved on. Invalid (0) readings are dropped too.
+    stay in the map after they moved on. Invalid (0) readings are dropped too. The beams
+    dropped for teammates become the scan's blind sectors, so that matching does not
+    expect this scan to have seen what stood behind them.
     """
 
     def __init__(self, localizer: Localizer, robot_ids: Iterable[int], robot_reach_m: float):
@@ -65,16 +69,16 @@ class Perception:
                 if index is not None:
                     received.append((index, message))
         scans = [
-            KeptScan(index, scan, self._mappable(scan, self.localizer.scan_pose(index)))
-            for index, scan in received
+            self._kept(index, scan, self.localizer.scan_pose(index)) for index, scan in received
         ]
         for scan in scans:
-            self.localizer.match_scan(scan.index, scan.mappable)
+            self.localizer.match_scan(scan.index, scan.mappable, scan.blind_sectors)
         self.localizer.optimize(close_loops=close_loops)
         return Localized(scans, landmarks)
 
-    def _mappable(self, scan: LidarScan, pose: np.ndarray) -> LidarScan:
-        keep = scan.ranges > 0
+    def _kept(self, index: int, scan: LidarScan, pose: np.ndarray) -> KeptScan:
+        valid = scan.ranges > 0
+        keep = valid.copy()
         angles = scan.angles + pose[2]
         ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
         for j in self.robot_ids:
@@ -82,8 +86,32 @@ class Perception:
                 with np.errstate(invalid="ignore"):
                     near = np.linalg.norm(ends - self.localizer.latest_pose(j)[:2], axis=1)
                     keep &= ~(near < self.robot_reach_m)
+        sectors = blind_sectors(scan.angles, scan.ranges, valid & ~keep)
         if keep.all():
-            return scan
-        return LidarScan(
+            return KeptScan(index, scan, scan, sectors)
+        mappable = LidarScan(
             scan.robot_id, scan.stamp, scan.angles[keep], scan.ranges[keep], scan.range_max_m
         )
+        return KeptScan(index, scan, mappable, sectors)
+
+
+def blind_sectors(angles_rad: np.ndarray, ranges_m: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+    """(K, 3) ``[from_rad, to_rad, range_m]``: each run of consecutive ``blocked`` beams,
+    widened by half the beam spacing on either side, and the nearest of their ranges."""
+    if not blocked.any():
+        return np.zeros((0, 3))
+    half_spacing_rad = (
+        0.5 * float(np.median(np.abs(np.diff(angles_rad)))) if len(angles_rad) > 1 else 0.0
+    )
+    edges = np.diff(np.concatenate([[0], blocked.astype(np.int8), [0]]))
+    firsts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return np.array(
+        [
+            [
+                float(angles_rad[first:end].min()) - half_spacing_rad,
+                float(angles_rad[first:end].max()) + half_spacing_rad,
+                float(ranges_m[first:end].min()),
+            ]
+            for first, end in zip(firsts, ends, strict=True)
+        ]
+    )

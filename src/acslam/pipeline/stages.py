@@ -78,9 +78,10 @@ class Localizer(Protocol):
         """Index of the scan, or None if it is not kept (no pose for its stamp yet)."""
         ...
 
-    def match_scan(self, index: int, scan: LidarScan) -> None:
+    def match_scan(self, index: int, scan: LidarScan, blind_sectors: np.ndarray) -> None:
         """Keep ``scan`` (the mappable beams) as scan ``index`` and constrain it by
-        matching."""
+        matching; ``blind_sectors`` (K, 3) ``[from_rad, to_rad, range_m]``: where teammates
+        blocked its view."""
         ...
 
     def optimize(self, close_loops: bool) -> None:

@@ -71,13 +71,19 @@ class LidarConstraints:
         self.loops_added = 0
         self.loops_rejected = 0
 
-    def add_scan(self, slam: SlamBackend, scan_index: int, scan: LidarScan) -> None:
+    def add_scan(
+        self,
+        slam: SlamBackend,
+        scan_index: int,
+        scan: LidarScan,
+        blind_sectors: np.ndarray | None = None,
+    ) -> None:
         """Keep the first scan of each keyframe; match it to the previous keyframe's and
-        to the baseline keyframe's."""
+        to the baseline keyframe's. ``blind_sectors``: where teammates blocked its view."""
         robot_id, keyframe = slam.scans.keyframe(scan_index)
         if (robot_id, keyframe) in self._by_keyframe:
             return
-        prepared = prepare_scan(scan.angles, scan.ranges, self.config)
+        prepared = prepare_scan(scan.angles, scan.ranges, self.config, blind_sectors)
         previous = self._by_keyframe.get((robot_id, keyframe - 1))
         path_m = 0.0
         if previous is not None:

@@ -48,9 +48,9 @@ class Isam2Localizer:
     def add_scan(self, message: LidarScan) -> int | None:
         return self.backend.add_scan(message)
 
-    def match_scan(self, index: int, scan: LidarScan) -> None:
+    def match_scan(self, index: int, scan: LidarScan, blind_sectors: np.ndarray) -> None:
         self.backend.scans.replace(index, scan)
-        self.scan_matcher.add_scan(self.backend, index, scan)
+        self.scan_matcher.add_scan(self.backend, index, scan, blind_sectors)
 
     def optimize(self, close_loops: bool) -> None:
         closures = self.scan_matcher.close_loops(self.backend) if close_loops else 0
