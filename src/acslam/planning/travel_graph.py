@@ -467,6 +467,7 @@ def _search(
     seeds: np.ndarray,
     seed_costs: np.ndarray,
     is_leg: np.ndarray,
+    leg_count: int,
     per_width: float,
     head: np.ndarray,
     entry_node: np.ndarray,
@@ -475,7 +476,7 @@ def _search(
     final: np.ndarray,
 ) -> None:
     """One Dijkstra from ``seeds`` at ``seed_costs`` into ``cost_to`` and ``final`` (the
-    rest is workspace, its contents ignored), until every leg node is final.
+    rest is workspace, its contents ignored), until all ``leg_count`` leg nodes are final.
 
     The queue is Dinitz's: buckets as wide as the cheapest edge (``1 / per_width``), in a
     ring of ``len(head)`` (a power of two that covers the dearest edge and the seeds'
@@ -498,7 +499,7 @@ def _search(
             entry_node[used], entry_next[used], head[slot] = v, head[slot], used
             used += 1
             pending += 1
-    legs_left = int(is_leg.sum())
+    legs_left = leg_count
     while pending > 0 and legs_left > 0:
         slot = bucket & mask
         while head[slot] >= 0:  # a relaxation may land here again by rounding
@@ -547,11 +548,12 @@ def _lane_searches(
     entry_next = np.empty(len(neighbours) + len(seeds), dtype=np.int32)
     cost_to = np.empty(nodes)
     final = np.empty(nodes, dtype=np.bool_)
+    leg_count = int(is_leg.sum())
     for s in range(lane, len(seed_offsets) - 1, lanes):
         first, last = seed_offsets[s], seed_offsets[s + 1]
         _search(
             offsets, neighbours, costs, seeds[first:last], seed_costs[first:last], is_leg,
-            per_width, head, entry_node, entry_next, cost_to, final,
+            leg_count, per_width, head, entry_node, entry_next, cost_to, final,
         )  # fmt: skip
         for j in range(len(leg_nodes)):
             if final[leg_nodes[j]]:
