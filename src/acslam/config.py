@@ -294,7 +294,11 @@ class SlamConfig(StageParams):
     # leaves Sigma_lm open. A larger sigma only throws information away: at 0.1 m the
     # landmark factors carried a tenth of what the camera measures.
     landmark_sigma_m: PositiveFloat = 0.03
+    # Along the line of sight a camera's range error often grows with the range (depth
+    # from disparity or from a marker's apparent size): the radial sigma is
+    # hypot(landmark_radial_sigma_m, landmark_radial_sigma_per_m x range).
     landmark_radial_sigma_m: NonNegativeFloat = 0.0
+    landmark_radial_sigma_per_m: NonNegativeFloat = 0.0
     landmark_angular_sigma_rad: NonNegativeFloat = 0.0
     huber_k: PositiveFloat = 2.8
     keyframe_distance_m: PositiveFloat = 0.3

@@ -18,6 +18,7 @@ from acslam.slam.factors import (
     planar_to_pose3,
     pose3_to_planar,
     robot_observation_factor,
+    sensor_covariance,
 )
 
 POSE = keys.pose_key(3, 7)
@@ -179,3 +180,23 @@ def test_key_scheme_round_trips_beyond_26_robots() -> None:
     assert keys.describe(keys.pose_key(30, 4)) == "robot 30 keyframe 4"
     with pytest.raises(ValueError):
         keys.pose_key(keys.MAX_ROBOTS, 0)
+
+
+def test_sensor_covariance_grows_along_the_ray_with_range() -> None:
+    """A point 4 m out along a direction at 30 degrees: along the ray the variance is
+    iso^2 + radial^2 + (per_m x 4 m)^2, across it iso^2 + (4 m x angular)^2, and the two
+    axes are the ray and its normal (eigenvectors)."""
+    config = SlamConfig(
+        landmark_sigma_m=0.03,
+        landmark_radial_sigma_m=0.02,
+        landmark_radial_sigma_per_m=0.05,
+        landmark_angular_sigma_rad=0.01,
+    )
+    ray = np.array([np.cos(np.pi / 6), np.sin(np.pi / 6), 0.0])
+    cov = sensor_covariance(config, 4.0 * ray)
+    normal = np.array([-ray[1], ray[0], 0.0])
+    assert ray @ cov @ ray == pytest.approx(0.03**2 + 0.02**2 + 0.2**2)
+    assert normal @ cov @ normal == pytest.approx(0.03**2 + 0.04**2)
+    assert ray @ cov @ normal == pytest.approx(0.0, abs=1e-15)
+    near = sensor_covariance(config, 1.0 * ray)
+    assert ray @ near @ ray == pytest.approx(0.03**2 + 0.02**2 + 0.05**2)

@@ -52,7 +52,6 @@ def geometric_association_ceiling(data: MrclamData, config: SlamConfig) -> dict[
     """
     subjects = np.array(sorted(data.landmark_truth))
     landmarks = np.array([data.landmark_truth[int(s)] for s in subjects])
-    sigma_r = math.hypot(config.landmark_sigma_m, config.landmark_radial_sigma_m)
     truth, chosen = [], []
     for n, msg in enumerate(data.messages):
         if not isinstance(msg, LandmarkObservations):
@@ -69,9 +68,14 @@ def geometric_association_ceiling(data: MrclamData, config: SlamConfig) -> dict[
         true_bearing = np.arctan2(offsets[:, 1], offsets[:, 0]) - pose[2]
         ranges = np.hypot(points[:, 0], points[:, 1])
         bearings = np.arctan2(points[:, 1], points[:, 0])
+        sigma_r = np.sqrt(
+            config.landmark_sigma_m**2
+            + config.landmark_radial_sigma_m**2
+            + (config.landmark_radial_sigma_per_m * ranges) ** 2
+        )
         sigma_b = np.hypot(config.landmark_sigma_m / np.maximum(ranges, 0.1),
                            config.landmark_angular_sigma_rad)  # fmt: skip
-        cost = ((ranges[:, None] - true_range) / sigma_r) ** 2 + (
+        cost = ((ranges[:, None] - true_range) / sigma_r[:, None]) ** 2 + (
             wrap_angles(bearings[:, None] - true_bearing) / sigma_b[:, None]
         ) ** 2
         rows, cols = linear_sum_assignment(cost)

@@ -58,12 +58,16 @@ def odometry_noise(
 
 
 def sensor_covariance(config: SlamConfig, point: np.ndarray) -> np.ndarray:
-    """3x3 covariance of an observed point (robot frame): isotropic + radial + angular."""
+    """3x3 covariance of an observed point (robot frame): isotropic, plus radial (a
+    constant and a part proportional to the range) and angular."""
     cov = np.eye(3) * config.landmark_sigma_m**2
     distance = float(np.linalg.norm(point))
     if distance > 0.0:
         ray = np.outer(point, point) / distance**2
-        cov += config.landmark_radial_sigma_m**2 * ray
+        radial_variance_m2 = (
+            config.landmark_radial_sigma_m**2 + (distance * config.landmark_radial_sigma_per_m) ** 2
+        )
+        cov += radial_variance_m2 * ray
         cov += (distance * config.landmark_angular_sigma_rad) ** 2 * (np.eye(3) - ray)
     return cov
 
