@@ -503,6 +503,12 @@ class ScanMatchingConfig(Section):
     max_sigma_m: PositiveFloat = 0.05
     max_sigma_rad: PositiveFloat = 0.02
     max_condition: Annotated[float, Field(ge=1)] = 25.0
+    # A sequential match must agree with the odometry it starts from: the squared
+    # Mahalanobis distance of its correction under the odometry's and the match's
+    # covariances summed is at most this (chi-square, 3 dof, 99.9 %; 0: not checked).
+    # Teammates driving alongside fit as well as walls and say "not moved"; odometry
+    # over one keyframe is far better than that.
+    odometry_gate_chi2: NonNegativeFloat = 16.27
     # A verified loop closure is restarted this far either way along its least
     # constrained axis; where a restart settles elsewhere with as good a fit, the gap is
     # added to its covariance (0: no restarts). See scan_matching.with_restart_spread.

@@ -352,6 +352,30 @@ def test_verification_rejects_scans_from_two_different_rooms() -> None:
     assert rejected == 10
 
 
+@pytest.mark.parametrize("direction_rad", [0.0, 1.0, 2.5])
+def test_a_sequential_match_must_agree_with_odometry(direction_rad: float) -> None:
+    """Odometry sigma 0.015 m on x and y, the match's 0.005 m: the correction's squared
+    Mahalanobis distance is |offset|^2 / (0.015^2 + 0.005^2), so the 16.27 gate lies at
+    sqrt(16.27 x 2.5e-4) = 0.0638 m in any direction; without odometry's covariance a
+    0.3 m correction passes (a convoy of teammates says "not moved" that way)."""
+    guess = np.array([0.3, 0.02, 0.1])
+    odometry = np.diag([0.015**2, 0.015**2, 0.01**2])
+    unit = np.array([math.cos(direction_rad), math.sin(direction_rad), 0.0])
+
+    def corrected_by(offset_m: float) -> ScanMatchResult:
+        relative = guess + offset_m * unit
+        covariance = np.diag([0.005**2, 0.005**2, 0.002**2])
+        return ScanMatchResult(relative, covariance, 0.9, 0.01, 5, True)
+
+    assert verify(corrected_by(0.060), guess, NOISY, strict=False, guess_covariance=odometry)
+    rejected = verify(corrected_by(0.067), guess, NOISY, strict=False, guess_covariance=odometry)
+    assert not rejected and "odometry" in rejected.reasons[0]
+    assert not verify(corrected_by(0.3), guess, NOISY, strict=False, guess_covariance=odometry)
+    assert verify(corrected_by(0.3), guess, NOISY, strict=False)
+    unchecked = NOISY.model_copy(update={"odometry_gate_chi2": 0.0})
+    assert verify(corrected_by(0.3), guess, unchecked, strict=False, guess_covariance=odometry)
+
+
 def test_verification_accepts_noisy_matches_in_the_same_room() -> None:
     accepted = 0
     for seed in range(10):

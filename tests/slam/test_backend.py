@@ -203,6 +203,28 @@ def test_keyframes_grow_with_distance_not_time() -> None:
     assert len(backend.landmarks()) == 1
 
 
+def test_odometry_chain_covariance_sums_the_keyframes() -> None:
+    """Three 0.5 m keyframes straight on (sigmas 0.025 m and 0.02 rad each with these
+    settings): from keyframe 0 to 3 the heading variance is 3 x 0.02^2 and x, y add the
+    position variances plus the heading's over the 1.5 m chain, 3 x 0.025^2 + 3 x 0.02^2
+    x 1.5^2; from 1 to 2, one keyframe's."""
+    config = SlamConfig(
+        keyframe_distance_m=0.5,
+        odom_sigma_xy_per_m=0.05,
+        odom_sigma_theta_per_m=0.04,
+        odom_sigma_theta_per_rad=0.05,
+    )
+    backend = SlamBackend(config, {0: np.zeros(3)})
+    for k in range(1, 16):
+        backend.add_odometry(OdometryIncrement(0, k * DT, (k - 1) * DT, 0.1, 0.0, 0.0))
+    assert backend.keyframe_count(0) == 4
+    chain = backend.odometry_chain_covariance(0, 0, 3)
+    var_xy = 3 * 0.025**2 + 3 * 0.02**2 * 1.5**2
+    assert np.allclose(chain, np.diag([var_xy, var_xy, 3 * 0.02**2]))
+    one = backend.odometry_chain_covariance(0, 1, 2)
+    assert np.allclose(one, np.diag([0.025**2 + 0.02**2 * 0.25, 0.025**2 + 0.02**2 * 0.25, 4e-4]))
+
+
 def test_time_going_backwards_is_skipped_and_counted() -> None:
     backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
     backend.add_odometry(OdometryIncrement(0, 1.0, 0.9, 0.1, 0.0, 0.0))

@@ -718,6 +718,7 @@ def verify(
     config: ScanMatchingConfig,
     strict: bool = True,
     max_correction_m: float | None = None,
+    guess_covariance: np.ndarray | None = None,
 ) -> Verification:
     """Accept a match only if it converged, enough of B fits A closely, the correction
     from the initial guess is plausible and (``strict``) the covariance is small and well
@@ -729,6 +730,9 @@ def verify(
     takes that direction from odometry); rejecting it would drop the heading and the
     cross-axis position, which the corridor constrains best. ``max_correction_m``
     overrides ``config.max_correction_m`` (a loop after a long way may have drifted more).
+    ``guess_covariance`` (3x3, x y theta; x and y isotropic, so in either scan's frame):
+    the guess is odometry's, and the correction must agree with it within
+    ``config.odometry_gate_chi2``.
     """
     limit_m = config.max_correction_m if max_correction_m is None else max_correction_m
     reasons: list[str] = []
@@ -743,6 +747,16 @@ def verify(
         reasons.append(f"translation correction > {limit_m:.2f} m")
     if abs(correction[2]) > config.max_correction_rad:
         reasons.append(f"rotation correction > {config.max_correction_rad} rad")
+    if guess_covariance is not None and config.odometry_gate_chi2 > 0.0:
+        offset = np.asarray(result.relative, dtype=float) - np.asarray(initial_guess, dtype=float)
+        offset[2] = wrap_angle(float(offset[2]))
+        combined = np.asarray(guess_covariance, dtype=float) + result.covariance
+        distance_sq = float(offset @ np.linalg.solve(combined, offset))
+        if not distance_sq <= config.odometry_gate_chi2:
+            reasons.append(
+                f"disagrees with odometry (Mahalanobis^2 {distance_sq:.1f} > "
+                f"{config.odometry_gate_chi2:g})"
+            )
     if not strict:
         return Verification(not reasons, tuple(reasons))
     xy_eigen = np.linalg.eigvalsh(result.covariance[:2, :2])

@@ -42,7 +42,7 @@ from acslam.slam.factors import (
     prior_noise,
 )
 from acslam.slam.keyframe_scans import KeyframeScans
-from acslam.slam.landmark_association import LandmarkAssociation
+from acslam.slam.landmark_association import LandmarkAssociation, chain_variance
 from acslam.slam.odometry_calibration import OdometryCalibration
 
 _GTSAM_ERRORS = (RuntimeError, ValueError, IndexError, KeyError)
@@ -232,6 +232,15 @@ class SlamBackend:
         if robot.distance_m == 0.0 and robot.angle_rad == 0.0:
             return np.zeros((3, 3))
         return np.diag(odometry_sigmas(self.config, robot.distance_m, robot.angle_rad) ** 2)
+
+    def odometry_chain_covariance(self, robot_id: int, since: int, now: int) -> np.ndarray:
+        """3x3 covariance ``[x, y, theta]`` of the odometry from keyframe ``since`` to
+        ``now`` of one robot: the sum of its keyframes' variances, the heading's acting
+        over the chain's length on x and y (isotropic, so in either end's frame)."""
+        robot = self._robots[int(robot_id)]
+        var_xy = chain_variance(robot, since, now, 0.0)
+        var_theta = robot.cum_var_theta[now] - robot.cum_var_theta[since]
+        return np.diag([var_xy, var_xy, var_theta])
 
     def new_landmark(self, position: np.ndarray, covariance: np.ndarray) -> int:
         """Add a landmark at ``position`` with its first covariance; returns its index."""

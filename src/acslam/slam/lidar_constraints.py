@@ -193,10 +193,23 @@ class LidarConstraints:
         # A sequential guess is odometry's over a short way; a loop's has drifted.
         result = match_scans(reference, b.scan, guess, self.config, guess_from_odometry=not robust)
         limit_m = None
+        odometry_covariance = None
         if robust:
             way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
             limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
-        if not verify(result, guess, self.config, strict=robust, max_correction_m=limit_m):
+        else:
+            robot_id, since = slam.scans.keyframe(a.scan_index)
+            odometry_covariance = slam.odometry_chain_covariance(
+                robot_id, since, slam.scans.keyframe(b.scan_index)[1]
+            )
+        if not verify(
+            result,
+            guess,
+            self.config,
+            strict=robust,
+            max_correction_m=limit_m,
+            guess_covariance=odometry_covariance,
+        ):
             return None
         if robust:
             result = with_restart_spread(reference, b.scan, result, self.config)
