@@ -524,6 +524,11 @@ class ScanMatchingConfig(Section):
     # the robot (placed by their current estimates): more of the scene per match, so
     # less drift per step. 1: the previous keyframe's scan alone.
     submap_keyframes: Annotated[int, Field(ge=1)] = 1
+    # Every scan besides its keyframe's first is matched to that first scan and placed by
+    # the match instead of by odometry, when verified: each scan's pose, the trajectory a
+    # replay writes and the map it composes, is then as good as the keyframes' (one ICP
+    # per scan; the graph does not change).
+    place_scans_by_matching: bool = False
 
 
 def _stage_section(kind: str) -> Any:

@@ -60,6 +60,17 @@ class KeyframeScans:
         _, keyframe, offset = self._scans[index]
         self._scans[index] = (scan, keyframe, offset)
 
+    def place(self, index: int, reference: int, relative: np.ndarray) -> None:
+        """Put scan ``index`` at ``relative`` (``[x, y, theta]``) in the frame of scan
+        ``reference`` of the same keyframe, instead of where odometry put it."""
+        scan, keyframe, _ = self._scans[index]
+        _, reference_keyframe, reference_offset = self._scans[reference]
+        if reference_keyframe != keyframe:
+            raise ValueError(f"scans {index} and {reference} belong to different keyframes")
+        offset = compose(reference_offset, np.asarray(relative, dtype=float))
+        self._scans[index] = (scan, keyframe, offset)
+        self._offsets[index] = offset
+
     def pose(self, index: int) -> np.ndarray:
         """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
         _, key, offset = self._scans[index]

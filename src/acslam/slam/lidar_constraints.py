@@ -79,11 +79,17 @@ class LidarConstraints:
         blind_sectors: np.ndarray | None = None,
     ) -> None:
         """Keep the first scan of each keyframe; match it to the previous keyframe's and
-        to the baseline keyframe's. ``blind_sectors``: where teammates blocked its view."""
+        to the baseline keyframe's (a later scan of a keyframe is only placed by a match,
+        with ``place_scans_by_matching``). ``blind_sectors``: where teammates blocked its
+        view."""
         robot_id, keyframe = slam.scans.keyframe(scan_index)
-        if (robot_id, keyframe) in self._by_keyframe:
+        first = self._by_keyframe.get((robot_id, keyframe))
+        if first is not None and not self.config.place_scans_by_matching:
             return
         prepared = prepare_scan(scan.angles, scan.ranges, self.config, blind_sectors)
+        if first is not None:
+            self._place(slam, self._entries[first], scan_index, prepared)
+            return
         previous = self._by_keyframe.get((robot_id, keyframe - 1))
         path_m = 0.0
         if previous is not None:
@@ -114,6 +120,16 @@ class LidarConstraints:
                 slam.calibrate_odometry(
                     robot_id, partner.stamp_s, scan.stamp, result.relative, result.covariance
                 )
+
+    def _place(
+        self, slam: SlamBackend, first: _KeyframeScan, scan_index: int, prepared: PreparedScan
+    ) -> None:
+        """Place a later scan of a keyframe by matching it to the keyframe's first scan
+        (odometry's placement stays if the match is not verified)."""
+        guess = between(slam.scans.pose(first.scan_index), slam.scans.pose(scan_index))
+        result = match_scans(first.scan, prepared, guess, self.config, guess_from_odometry=True)
+        if verify(result, guess, self.config, strict=False):
+            slam.scans.place(scan_index, first.scan_index, result.relative)
 
     def _baseline_partner(
         self, robot_id: int, keyframe: int, path_m: float
