@@ -63,7 +63,20 @@ from acslam.geometry import between, transform_points, wrap_angle
 
 
 @dataclass(frozen=True, eq=False)
-class PreparedScan:
+class ScanPoints:
+    """A scan's valid returns in its sensor frame: all a scan matched *to* another needs.
+
+    Built by :func:`scan_points`; a scan matched only as the query (e.g. placed within its
+    keyframe) skips the KD-tree and surfaces a reference needs.
+    """
+
+    points_m: np.ndarray
+    ranges_m: np.ndarray
+    directions: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedScan(ScanPoints):
     """A scan's valid returns in its sensor frame, with what matching against it needs.
 
     Built once per scan by :func:`prepare_scan` (a keyframe's scan is matched many times).
@@ -78,9 +91,6 @@ class PreparedScan:
     blocked the view, and the range it blocked from; beyond it the scan saw nothing.
     """
 
-    points_m: np.ndarray
-    ranges_m: np.ndarray
-    directions: np.ndarray
     tree: cKDTree
     line_points_m: np.ndarray
     line_normals: np.ndarray
@@ -127,16 +137,11 @@ def _beam_sigmas_m(ranges_m: np.ndarray, config: ScanMatchingConfig) -> tuple[np
     return config.range_noise_std_m + config.range_noise_rel * ranges_m, config.angle_noise_std_rad
 
 
-def prepare_scan(
-    angles_rad: np.ndarray,
-    ranges_m: np.ndarray,
-    config: ScanMatchingConfig,
-    blind_sectors: np.ndarray | None = None,
-) -> PreparedScan:
-    """Points, KD-tree and neighbourhood lines of a scan; ``inf``/non-finite ranges dropped,
-    and of the returns in one ``config.voxel_filter_m`` cell only the first kept.
-    ``blind_sectors``: where teammates blocked the view (:class:`PreparedScan`)."""
-    blind = np.zeros((0, 3)) if blind_sectors is None else np.asarray(blind_sectors, float)
+def scan_points(
+    angles_rad: np.ndarray, ranges_m: np.ndarray, config: ScanMatchingConfig
+) -> ScanPoints:
+    """A scan's points; ``inf``/non-finite ranges dropped, and of the returns in one
+    ``config.voxel_filter_m`` cell only the first kept."""
     angles_rad = np.asarray(angles_rad, dtype=float)
     ranges_m = np.asarray(ranges_m, dtype=float)
     valid = np.isfinite(ranges_m) & (ranges_m > 0.0)
@@ -148,6 +153,20 @@ def prepare_scan(
         _, first = np.unique(cells, axis=0, return_index=True)
         kept = np.sort(first)
         ranges, directions, points = ranges[kept], directions[kept], points[kept]
+    return ScanPoints(points, ranges, directions)
+
+
+def prepare_scan(
+    angles_rad: np.ndarray,
+    ranges_m: np.ndarray,
+    config: ScanMatchingConfig,
+    blind_sectors: np.ndarray | None = None,
+) -> PreparedScan:
+    """Points (:func:`scan_points`), KD-tree and neighbourhood lines of a scan.
+    ``blind_sectors``: where teammates blocked the view (:class:`PreparedScan`)."""
+    blind = np.zeros((0, 3)) if blind_sectors is None else np.asarray(blind_sectors, float)
+    returns = scan_points(angles_rad, ranges_m, config)
+    points, ranges, directions = returns.points_m, returns.ranges_m, returns.directions
     tree = cKDTree(points)
     k = min(config.line_neighbors, len(points))
     if k < 3:
@@ -445,7 +464,7 @@ class _Residuals:
 def _linearize(
     pose: np.ndarray,
     reference: PreparedScan,
-    query: PreparedScan,
+    query: ScanPoints,
     params: np.ndarray,
     out: _Residuals,
 ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
@@ -478,7 +497,7 @@ def _settings(config: ScanMatchingConfig) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def match_scans(
     reference: PreparedScan,
-    query: PreparedScan,
+    query: ScanPoints,
     initial_guess: np.ndarray,
     config: ScanMatchingConfig,
     guess_from_odometry: bool = False,
@@ -535,7 +554,7 @@ def match_scans(
 def _visible_inlier_ratio(
     pose: np.ndarray,
     reference: PreparedScan,
-    query: PreparedScan,
+    query: ScanPoints,
     inlier_count: int,
     inliers: np.ndarray,
 ) -> float:
@@ -629,7 +648,7 @@ def _without_untrusted_axis_information(
 
 def _iterate(
     reference: PreparedScan,
-    query: PreparedScan,
+    query: ScanPoints,
     initial: np.ndarray,
     config: ScanMatchingConfig,
     prior: np.ndarray,
@@ -674,7 +693,7 @@ def _iterate(
 
 def with_restart_spread(
     reference: PreparedScan,
-    query: PreparedScan,
+    query: ScanPoints,
     result: ScanMatchResult,
     config: ScanMatchingConfig,
 ) -> ScanMatchResult:

@@ -27,6 +27,7 @@ from acslam.mapping.scan_matching import (
     ScanMatchResult,
     match_scans,
     prepare_scan,
+    scan_points,
     verify,
     with_restart_spread,
 )
@@ -84,12 +85,11 @@ class LidarConstraints:
         view."""
         robot_id, keyframe = slam.scans.keyframe(scan_index)
         first = self._by_keyframe.get((robot_id, keyframe))
-        if first is not None and not self.config.place_scans_by_matching:
+        if first is not None:
+            if self.config.place_scans_by_matching:
+                self._place(slam, self._entries[first], scan_index, scan)
             return
         prepared = prepare_scan(scan.angles, scan.ranges, self.config, blind_sectors)
-        if first is not None:
-            self._place(slam, self._entries[first], scan_index, prepared)
-            return
         previous = self._by_keyframe.get((robot_id, keyframe - 1))
         path_m = 0.0
         if previous is not None:
@@ -122,12 +122,13 @@ class LidarConstraints:
                 )
 
     def _place(
-        self, slam: SlamBackend, first: _KeyframeScan, scan_index: int, prepared: PreparedScan
+        self, slam: SlamBackend, first: _KeyframeScan, scan_index: int, scan: LidarScan
     ) -> None:
         """Place a later scan of a keyframe by matching it to the keyframe's first scan
         (odometry's placement stays if the match is not verified)."""
         guess = between(slam.scans.pose(first.scan_index), slam.scans.pose(scan_index))
-        result = match_scans(first.scan, prepared, guess, self.config, guess_from_odometry=True)
+        query = scan_points(scan.angles, scan.ranges, self.config)
+        result = match_scans(first.scan, query, guess, self.config, guess_from_odometry=True)
         if verify(result, guess, self.config, strict=False):
             slam.scans.place(scan_index, first.scan_index, result.relative)
 
