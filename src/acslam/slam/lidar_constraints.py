@@ -11,7 +11,9 @@ keyframe is also matched to keyframes close in space, of the same robot much ear
 of another robot: loop closures, which tie trajectories together. Every match is
 verified before it enters the graph. A loop closure must also be the only fit near its
 guess (restarted to either side, the match comes back to it) and gets a Huber kernel,
-because a wrong one would bend the whole map.
+because a wrong one would bend the whole map. A sequential match must also agree with the
+odometry it started from (``odometry_gate_chi2``). With ``place_scans_by_matching`` the
+later scans of a keyframe are placed by a match against its first scan, not by odometry.
 """
 
 from __future__ import annotations
