@@ -34,6 +34,7 @@ from acslam.messages import LandmarkObservations, RobotMessage, RobotSighting
 from acslam.pipeline.stages import Localizer
 from acslam.provenance import write_metrics
 from acslam.replay import Replayed, localize, preset
+from acslam.slam.factors import radial_variance_m2
 from acslam.trajectory import write_tum
 
 MAX_GROUNDTRUTH_GAP_S = 0.25
@@ -68,11 +69,7 @@ def geometric_association_ceiling(data: MrclamData, config: SlamConfig) -> dict[
         true_bearing = np.arctan2(offsets[:, 1], offsets[:, 0]) - pose[2]
         ranges = np.hypot(points[:, 0], points[:, 1])
         bearings = np.arctan2(points[:, 1], points[:, 0])
-        sigma_r = np.sqrt(
-            config.landmark_sigma_m**2
-            + config.landmark_radial_sigma_m**2
-            + (config.landmark_radial_sigma_per_m * ranges) ** 2
-        )
+        sigma_r = np.sqrt(config.landmark_sigma_m**2 + radial_variance_m2(config, ranges))
         sigma_b = np.hypot(config.landmark_sigma_m / np.maximum(ranges, 0.1),
                            config.landmark_angular_sigma_rad)  # fmt: skip
         cost = ((ranges[:, None] - true_range) / sigma_r[:, None]) ** 2 + (

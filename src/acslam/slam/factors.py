@@ -57,6 +57,14 @@ def odometry_noise(
     return gtsam.noiseModel.Diagonal.Sigmas(np.array([p, p, sth, sxy, sxy, p]))
 
 
+def radial_variance_m2(config: SlamConfig, distance_m: float | np.ndarray) -> float | np.ndarray:
+    """Variance along the line of sight beyond the isotropic part: a constant, and a part
+    that grows with the range."""
+    return (
+        config.landmark_radial_sigma_m**2 + (distance_m * config.landmark_radial_sigma_per_m) ** 2
+    )
+
+
 def sensor_covariance(config: SlamConfig, point: np.ndarray) -> np.ndarray:
     """3x3 covariance of an observed point (robot frame): isotropic, plus radial (a
     constant and a part proportional to the range) and angular."""
@@ -64,10 +72,7 @@ def sensor_covariance(config: SlamConfig, point: np.ndarray) -> np.ndarray:
     distance = float(np.linalg.norm(point))
     if distance > 0.0:
         ray = np.outer(point, point) / distance**2
-        radial_variance_m2 = (
-            config.landmark_radial_sigma_m**2 + (distance * config.landmark_radial_sigma_per_m) ** 2
-        )
-        cov += radial_variance_m2 * ray
+        cov += radial_variance_m2(config, distance) * ray
         cov += (distance * config.landmark_angular_sigma_rad) ** 2 * (np.eye(3) - ray)
     return cov
 
