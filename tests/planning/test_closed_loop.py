@@ -30,7 +30,7 @@ from acslam.planning.dwa import DynamicWindowPlanner
 from acslam.planning.fgp import FactorGraphPlanner
 from acslam.planning.field import DistanceField, RobotState
 from acslam.planning.params import AstarParams, DwaParams, FgpParams
-from acslam.planning.recovery import Recovery
+from acslam.planning.recovery import Recovery, penalize
 from acslam.planning.stuck import StuckDetector
 from acslam.sim.simulator import Simulator
 from acslam.worlds.mapio import world_cells
@@ -114,7 +114,7 @@ def drive(
     reach_m = PLANNING.horizon_s * ROBOTS.max_v_mps
 
     def replan(r: int, xy_m: np.ndarray, now_s: float) -> None:
-        cost = recoveries[r].penalize(costmap.cost, spec)
+        cost = penalize(costmap.cost, spec, recoveries[r].traps_xy_m, PLANNING)
         try:
             path = plan_path(
                 cost,

@@ -7,7 +7,7 @@ import numpy as np
 from acslam.config import PlanningConfig
 from acslam.grid import GridSpec
 from acslam.planning.field import RobotState
-from acslam.planning.recovery import Recovery
+from acslam.planning.recovery import Recovery, penalize
 
 PLANNING = PlanningConfig()
 PERIOD_S = PLANNING.control_period_s
@@ -54,9 +54,9 @@ def test_penalty_raises_cost_near_traps_only_and_keeps_lethal() -> None:
     cost = np.zeros(grid.shape)
     cost[0, 0] = np.inf
     recovery = Recovery(PLANNING)
-    np.testing.assert_array_equal(recovery.penalize(cost, grid), cost)
+    np.testing.assert_array_equal(penalize(cost, grid, recovery.traps_xy_m, PLANNING), cost)
     recovery.traps_xy_m.append(np.array([1.5, 1.5]))
-    penalised = recovery.penalize(cost, grid)
+    penalised = penalize(cost, grid, recovery.traps_xy_m, PLANNING)
     centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, dtype=bool))).reshape(30, 30, 2)
     near = np.linalg.norm(centres - [1.5, 1.5], axis=-1) <= PLANNING.recovery_penalty_radius_m
     assert near.sum() > 50

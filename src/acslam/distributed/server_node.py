@@ -1,7 +1,9 @@
 """``acslam serve``: the server in wall-clock time, talking to robots over Zenoh.
 
 Each control period the server steps on whatever arrived since the last one (late
-messages are simply used late), sends commands and publishes its status. It starts once
+messages are simply used late), sends commands and publishes its status. The map update
+and the decisions run beside that loop (:class:`~acslam.pipeline.jobs.BackgroundJobs`), so
+a slow allocation delays new goals, not the robots' commands. It starts once
 every robot has sent a heartbeat, at the pose the heartbeat reports: the start pose on a
 fresh run, the robot's own dead-reckoned pose after a server restart (there is no
 persisted state; the restarted server maps afresh from there). A robot whose heartbeats
@@ -23,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from acslam.pipeline.jobs import BackgroundJobs
 from acslam.pipeline.server import Server
 from acslam.runner import (
     NO_HOOKS,
@@ -68,7 +71,7 @@ def serve(
     try:
         endpoint = ZenohServerEndpoint(session, count)
         starts, missing = _wait_for_robots(endpoint, scenario, options.startup_timeout_s)
-        server = Server(scenario.config, starts, scenario.world.spec)
+        server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
         for robot in missing:
             server.mark_lost(robot, 0.0)
             endpoint.ignore(robot)
@@ -76,9 +79,12 @@ def serve(
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
         source = ZenohSource(endpoint, period_s, options.heartbeat_timeout_s)
-        reason, wall_time_s = run_loop(
-            server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
-        )
+        try:
+            reason, wall_time_s = run_loop(
+                server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
+            )
+        finally:
+            server.close()
         now_s = source.time_s
         lost = log.last.lost
         for _ in range(FINAL_STATUS_REPEATS):

@@ -13,13 +13,23 @@ The server sees only :mod:`acslam.messages` and the map's extent (a deployment p
 like the thesis's fixed 40 m x 40 m grid); it never touches simulator ground truth. The
 costmap and the planners work on the known area's window of the grid
 (:func:`~acslam.mapping.costmap.known_window`).
+
+Mapping, the map update and the decisions (allocation and global plans) are jobs
+(:mod:`acslam.pipeline.jobs`): in-process runs do them in the cycle that scheduled them;
+served runs do them beside the control loop, which keeps localizing and sending the local
+planner's commands meanwhile. A job reads what was handed to it when it was scheduled and
+the stages only its lane's jobs touch, one job at a time in order; its result changes the
+server's state only when the control cycle takes it. Readers of the map outside the
+server (a live view, the run's explored-area samples) may then see a scan half added.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Future
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -33,6 +43,7 @@ from acslam.exploration.patrol import Patrol
 from acslam.grid import FREE, GridSpec, Window
 from acslam.mapping.costmap import Costmap, compute_costmap, known_window
 from acslam.messages import RobotMessage, VelocityCommand
+from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import (
     ALLOCATORS,
@@ -46,9 +57,13 @@ from acslam.pipeline.registry import (
 from acslam.pipeline.snapshot import LocalizationView, MapView, Snapshot
 from acslam.planning.astar import lookahead_point, remaining_length_m
 from acslam.planning.field import DistanceField, RobotState
-from acslam.planning.recovery import Recovery
+from acslam.planning.recovery import Recovery, penalize
 
 TEAM_FRAME = "map"
+MAP_LANE = "map"
+"""Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
+DECISION_LANE = "decisions"
+"""Jobs of the allocator and the global planner."""
 
 
 @dataclass
@@ -62,11 +77,66 @@ class RobotTask:
     idle_since_s: float | None = None
 
 
+@dataclass(frozen=True)
+class _MapProducts:
+    """What a map update made of the grid: the known window, its costmap, the frontier
+    cells (of the whole grid) and their clusters (of the window)."""
+
+    values: np.ndarray
+    window: Window
+    costmap: Costmap
+    frontier_cells: np.ndarray
+    clusters: list[FrontierCluster]
+    timings_s: dict[str, float]
+
+
+@dataclass(frozen=True)
+class _TaskState:
+    """What the decisions read of a robot's task, copied when they were scheduled."""
+
+    cluster: FrontierCluster | None
+    has_path: bool
+    idle_since_s: float | None
+    traps_xy_m: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """A robot's goal and global path from the decisions (both None: it has neither)."""
+
+    cluster: FrontierCluster | None
+    path_m: np.ndarray | None
+    new_goal: bool
+    remaining_m: float
+
+
+@dataclass(frozen=True)
+class _Decisions:
+    """The decisions' result: plans by robot, and whether the team is done exploring
+    (with the patrol that follows, if any) or done patrolling."""
+
+    plans: dict[int, _Plan]
+    idle_since_s: dict[int, float | None]
+    explored_s: float | None
+    patrol: Patrol | None
+    finished: bool
+    timings_s: dict[str, float]
+
+
 class Server:
     """Localizes, maps, explores and plans for the whole team from robot messages."""
 
-    def __init__(self, config: ScenarioConfig, starts: np.ndarray, map_spec: GridSpec) -> None:
+    def __init__(
+        self,
+        config: ScenarioConfig,
+        starts: np.ndarray,
+        map_spec: GridSpec,
+        jobs: Jobs | None = None,
+    ) -> None:
+        """``jobs``: where the map update and the decisions run (in the cycle that
+        schedules them unless given, see :mod:`acslam.pipeline.jobs`)."""
         self._config = config
+        self._jobs: Jobs = InlineJobs() if jobs is None else jobs
         algorithms = config.algorithms
         self._robot_count = len(starts)
         self._map_spec = map_spec
@@ -96,6 +166,9 @@ class Server:
         self._values: np.ndarray | None = None
         self._frontier_cells = np.zeros((0, 2), dtype=np.int64)
         self._clusters: list[FrontierCluster] = []
+        self._mapping_jobs: deque[Future[float]] = deque()
+        self._map_job: Future[_MapProducts] | None = None
+        self._decision_job: Future[_Decisions] | None = None
         self._next_map_update_s = 0.0
         self._next_replan_s = 0.0
         self._replan_now = True
@@ -166,160 +239,262 @@ class Server:
         map_update_due = now_s >= self._next_map_update_s
         with self._timed("slam"):
             scans = self._perception.localize(messages, close_loops=map_update_due).scans
-        with self._timed("mapping"):
-            self._integrate(scans)
+        self._integrate(scans)
+        self._take_mapping()
         if map_update_due:
             self._next_map_update_s = now_s + self._config.algorithms.server.map_update_period_s
-            with self._timed("costmap"):
-                self._update_costmap()
-            with self._timed("frontiers"):
-                self._update_frontiers()
+            if self._map_job is None:
+                self._map_job = self._jobs.submit(MAP_LANE, self._map_update())
+        self._take_map_products()
         poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
-        if self._replan_now or now_s >= self._next_replan_s:
-            with self._timed("allocation"):
-                self._allocate(poses, now_s)
+        if (self._replan_now or now_s >= self._next_replan_s) and self._decision_job is None:
+            if self._costmap is None:
+                self._timings_s["allocation"] = 0.0
+            else:
+                self._decision_job = self._jobs.submit(DECISION_LANE, self._decisions(poses, now_s))
             self._next_replan_s = now_s + self._config.algorithms.planning.replan_period_s
             self._replan_now = False
+        self._take_decisions(now_s)
         with self._timed("local_planning"):
             return self._local_plan(poses, now_s)
 
-    # ------------------------------------------------------------------ map
+    def close(self) -> None:
+        """End the run: wait for every job scheduled so far."""
+        self._jobs.close()
 
     def _integrate(self, scans: list[KeptScan]) -> None:
-        """Add new (mappable) scans at their keyframe-relative pose; move scans SLAM
-        corrected."""
+        """Hand the mapper the new (mappable) scans at their keyframe-relative pose and
+        the scans SLAM corrected at their new pose (a job)."""
+        added = []
         for kept in scans:
             pose = self._localizer.scan_pose(kept.index)
+            added.append((kept, pose))
+            self._new_scan_cells.append(self._map_spec.world_to_cell(pose[:2])[0])
+        moved = [
+            (index, self._localizer.scan_pose(index)) for index in self._localizer.moved_scans()
+        ]
+        if moved:
+            self._corrected = True
+        self._mapping_jobs.append(
+            self._jobs.submit(MAP_LANE, lambda: self._map_scans(added, moved))
+        )
+
+    def _map_scans(
+        self, added: list[tuple[KeptScan, np.ndarray]], moved: list[tuple[int, np.ndarray]]
+    ) -> float:
+        """Add and move scans in the mapper (a job; the mapper is touched by jobs only,
+        one at a time in order). Returns its wall seconds."""
+        start = time.perf_counter()
+        for kept, pose in added:
             scan = kept.mappable
             self._mapper.add_scan(
                 scan.robot_id, kept.index, scan.ranges, scan.angles, pose, scan.range_max_m
             )
-            self._new_scan_cells.append(self._map_spec.world_to_cell(pose[:2])[0])
-        moved = self._localizer.moved_scans()
-        if moved:
-            for index in moved:
-                self._mapper.move_scan(index, self._localizer.scan_pose(index))
-            self._corrected = True
+        for index, pose in moved:
+            self._mapper.move_scan(index, pose)
+        return time.perf_counter() - start
 
-    def _update_costmap(self) -> None:
+    def _take_mapping(self) -> None:
+        """The mapper's work that ended since the last cycle, as this cycle's mapping."""
+        seconds = 0.0
+        while self._mapping_jobs and self._mapping_jobs[0].done():
+            seconds += self._mapping_jobs.popleft().result()
+        self._timings_s["mapping"] = seconds
+
+    def _map_update(self) -> Callable[[], _MapProducts]:
+        """The map update's job, on the grid as the mapping jobs before it leave it, and
+        the scans added since the last one (all of the map, after a correction)."""
+        robot_cells = self._map_spec.world_to_cell(
+            np.array([self._localizer.latest_pose(i)[:2] for i in range(self._robot_count)])
+        )
+        scan_cells = None if self._corrected else np.array(self._new_scan_cells).reshape(-1, 2)
+        self._new_scan_cells.clear()
+        self._corrected = False
+        return lambda: self._map_products(robot_cells, scan_cells)
+
+    def _map_products(self, robot_cells: np.ndarray, scan_cells: np.ndarray | None) -> _MapProducts:
+        """Costmap of the known window, frontiers, clusters (a job: reads only its
+        arguments and the stages jobs alone use)."""
+        timings_s: dict[str, float] = {}
+        start = time.perf_counter()
         values = self._mapper.occupancy_values()
         server = self._config.algorithms.server
         window = known_window(values, self._map_spec, server.window_margin_m)
-        self._values = values
-        self._window = window
-        self._costmap = compute_costmap(
+        costmap = compute_costmap(
             window.crop(values),
             window.spec,
             self._config.algorithms.costmap,
             self._config.robots.radius_m,
         )
+        timings_s["costmap"] = time.perf_counter() - start
+        start = time.perf_counter()
+        frontier_cells = self._frontier_detector.update(values, robot_cells, scan_cells)
+        clusters = self._clusterer.cluster(
+            window.to_local(frontier_cells), window.crop(values), window.spec, costmap
+        )
+        timings_s["frontiers"] = time.perf_counter() - start
+        return _MapProducts(values, window, costmap, frontier_cells, clusters, timings_s)
 
-    def _update_frontiers(self) -> None:
-        assert self._values is not None and self._window is not None and self._costmap is not None
-        robot_cells = self._map_spec.world_to_cell(
-            np.array([self._localizer.latest_pose(i)[:2] for i in range(self._robot_count)])
-        )
-        scan_cells = None if self._corrected else np.array(self._new_scan_cells).reshape(-1, 2)
-        self._frontier_cells = self._frontier_detector.update(self._values, robot_cells, scan_cells)
-        self._new_scan_cells.clear()
-        self._corrected = False
-        window = self._window
-        self._clusters = self._clusterer.cluster(
-            window.to_local(self._frontier_cells),
-            window.crop(self._values),
-            window.spec,
-            self._costmap,
-        )
+    def _take_map_products(self) -> None:
+        job = self._map_job
+        if job is None or not job.done():
+            return
+        self._map_job = None
+        products = job.result()
+        self._values, self._window = products.values, products.window
+        self._costmap, self._clusters = products.costmap, products.clusters
+        self._frontier_cells = products.frontier_cells
+        self._timings_s.update(products.timings_s)
 
     # ------------------------------------------------------------------ decisions
 
-    def _allocate(self, poses: np.ndarray, now_s: float) -> None:
-        """Assign clusters and plan a global path to each; a robot with none goes idle.
-        Once explored, drive the patrol's tour instead, if the scenario asks for one."""
-        costmap, window = self._costmap, self._window
-        if costmap is None or window is None:
-            return
+    def _decisions(self, poses: np.ndarray, now_s: float) -> Callable[[], _Decisions]:
+        """The decisions' job, on the map products and the tasks as of now."""
+        costmap, window, values = self._costmap, self._window, self._values
+        clusters = self._clusters
+        assert costmap is not None and window is not None
         active = [i for i in range(self._robot_count) if i not in self._lost]
+        tasks = {
+            i: _TaskState(
+                self._tasks[i].cluster,
+                self._tasks[i].path_m is not None,
+                self._tasks[i].idle_since_s,
+                tuple(self._tasks[i].recovery.traps_xy_m),
+            )
+            for i in active
+        }
+        mapped = len(self._mapper) > 0
+        poses = poses.copy()
+        return lambda: self._decide(
+            poses, now_s, active, tasks, costmap, window, values, clusters, mapped
+        )
+
+    def _decide(
+        self, poses: np.ndarray, now_s: float, active: list[int], tasks: dict[int, _TaskState],
+        costmap: Costmap, window: Window, values: np.ndarray | None,
+        clusters: list[FrontierCluster], mapped: bool,
+    ) -> _Decisions:  # fmt: skip
+        """Assign clusters and plan a global path to each; a robot with none goes idle.
+        Once explored, drive the patrol's tour instead, if the scenario asks for one (a
+        job: reads its arguments, its lane's stages and the patrol, which the control
+        cycle replaces only when it takes this job's result)."""
+        start = time.perf_counter()
         if self._patrol is not None:
-            self._drive_patrol(active, poses, now_s)
-            return
+            plans = self._patrol_plans(active, tasks, poses, costmap, window)
+            finished = now_s - self._patrol.started_s >= self._config.algorithms.server.patrol_s
+            idle = {i: None for i, plan in plans.items() if plan.path_m is not None}
+            timings_s = {"allocation": time.perf_counter() - start}
+            return _Decisions(plans, idle, None, self._patrol, finished, timings_s)
         robot_cells = window.spec.world_to_cell(poses[:, :2])
         robot_cells = np.clip(robot_cells, 0, np.array(window.spec.shape) - 1)
-        current = [self._matching_cluster(self._tasks[i]) for i in active]
-        allocation = self._allocator.allocate(robot_cells[active], self._clusters, costmap, current)
+        current = [self._matching_cluster(tasks[i].cluster, clusters) for i in active]
+        allocation = self._allocator.allocate(robot_cells[active], clusters, costmap, current)
+        plans, idle = {}, {}
         for k, i in enumerate(active):
-            task = self._tasks[i]
             choice = allocation.cluster_of_robot[k]
-            target = None if choice is None else self._clusters[choice]
-            assigned = self._assign(i, target, poses[i, :2], now_s, choice != current[k])
-            if not assigned and task.idle_since_s is None:
-                task.idle_since_s = now_s
+            target = None if choice is None else clusters[choice]
+            plans[i] = self._plan(
+                tasks[i], target, poses[i, :2], costmap, window, choice != current[k]
+            )
+            if plans[i].path_m is not None:
+                idle[i] = None
+            else:
+                idle[i] = now_s if tasks[i].idle_since_s is None else tasks[i].idle_since_s
         # Done once every robot has had nothing to do for a while after the map has begun:
         # frontiers briefly vanish while a robot stands on the last one it was sent to.
-        idle_since = [self._tasks[i].idle_since_s for i in active]
         explored = (
-            len(self._mapper) > 0
-            and all(s is not None for s in idle_since)
-            and now_s - max(idle_since) >= self._config.algorithms.server.finish_after_idle_s
+            mapped
+            and bool(idle)
+            and all(s is not None for s in idle.values())
+            and now_s - max(s for s in idle.values() if s is not None)
+            >= self._config.algorithms.server.finish_after_idle_s
         )
+        explored_s, patrol, finished = None, None, False
         if explored:
-            self._explored_s = now_s
+            explored_s = now_s
             server = self._config.algorithms.server
-            if server.patrol_s > 0 and self._values is not None:
+            if server.patrol_s > 0 and values is not None:
                 # Waypoints in the open, a robot radius clear of the lethal band.
                 clear_m = 2 * self._config.robots.radius_m
-                free = (window.crop(self._values) == FREE) & (costmap.distance_m >= clear_m)
-                self._patrol = Patrol.over(
+                free = (window.crop(values) == FREE) & (costmap.distance_m >= clear_m)
+                patrol = Patrol.over(
                     free, window.spec, server.patrol_spacing_m, poses[active[0]], now_s,
                     self._robot_count,
                 )  # fmt: skip
-            self._finished = self._patrol is None
+            finished = patrol is None
+        timings_s = {"allocation": time.perf_counter() - start}
+        return _Decisions(plans, idle, explored_s, patrol, finished, timings_s)
 
-    def _assign(
-        self, robot: int, target: FrontierCluster | None, xy_m: np.ndarray, now_s: float,
-        changed: bool,
-    ) -> bool:  # fmt: skip
-        """Plan the robot's global path to ``target``; without a target or a path to it
-        the robot has neither. Returns whether it has one."""
-        costmap, window, task = self._costmap, self._window, self._tasks[robot]
-        assert costmap is not None and window is not None
+    def _plan(
+        self, task: _TaskState, target: FrontierCluster | None, xy_m: np.ndarray,
+        costmap: Costmap, window: Window, changed: bool,
+    ) -> _Plan:  # fmt: skip
+        """The robot's global path to ``target``; without a target or a path to it the
+        robot has neither."""
         path = None
         if target is not None:
             try:
+                planning = self._config.algorithms.planning
                 path = self._global_planner.plan(
-                    task.recovery.penalize(costmap.cost, window.spec), costmap.lethal,
-                    window.spec, xy_m, target.target_m,
+                    penalize(costmap.cost, window.spec, task.traps_xy_m, planning),
+                    costmap.lethal, window.spec, xy_m, target.target_m,
                 )  # fmt: skip
             except NoPathError:
                 path = None
         if path is None:
-            task.cluster, task.path_m = None, None
-            return False
-        task.cluster = target
-        task.path_m = np.vstack([xy_m, path])
-        task.recovery.replanned(now_s, changed, remaining_length_m(task.path_m, xy_m))
-        task.idle_since_s = None
-        return True
+            return _Plan(None, None, changed, 0.0)
+        path_m = np.vstack([xy_m, path])
+        return _Plan(target, path_m, changed, remaining_length_m(path_m, xy_m))
 
-    def _drive_patrol(self, active: list[int], poses: np.ndarray, now_s: float) -> None:
-        """Each robot on along the tour; finished when the patrol has lasted its time."""
+    def _patrol_plans(
+        self, active: list[int], tasks: dict[int, _TaskState], poses: np.ndarray,
+        costmap: Costmap, window: Window,
+    ) -> dict[int, _Plan]:  # fmt: skip
+        """Each robot on along the tour."""
         assert self._patrol is not None
+        plans = {}
         for i in active:
-            old = self._tasks[i].cluster
-            reached = old is not None and self._tasks[i].path_m is None
+            old = tasks[i].cluster
+            reached = old is not None and not tasks[i].has_path
             for waypoint in self._patrol.goals(i, reached):
                 changed = old is None or not np.array_equal(old.target_m, waypoint.target_m)
-                if self._assign(i, waypoint, poses[i, :2], now_s, changed):
+                plans[i] = self._plan(tasks[i], waypoint, poses[i, :2], costmap, window, changed)
+                if plans[i].path_m is not None:
                     break
-        self._finished = now_s - self._patrol.started_s >= self._config.algorithms.server.patrol_s
+        return plans
 
-    def _matching_cluster(self, task: RobotTask) -> int | None:
-        """The current cluster that continues the robot's goal: its target is nearest the
-        old target, within the goal tolerance plus the clusterer's linkage."""
-        if task.cluster is None or not self._clusters:
+    def _take_decisions(self, now_s: float) -> None:
+        """Give each robot its plan (a robot lost since they were scheduled gets none)."""
+        job = self._decision_job
+        if job is None or not job.done():
+            return
+        self._decision_job = None
+        decisions = job.result()
+        for i, plan in decisions.plans.items():
+            if i in self._lost:
+                continue
+            task = self._tasks[i]
+            task.cluster, task.path_m = plan.cluster, plan.path_m
+            if plan.path_m is not None:
+                task.recovery.replanned(now_s, plan.new_goal, plan.remaining_m)
+        for i, idle_since_s in decisions.idle_since_s.items():
+            if i not in self._lost:
+                self._tasks[i].idle_since_s = idle_since_s
+        if decisions.explored_s is not None:
+            self._explored_s = decisions.explored_s
+        self._patrol = decisions.patrol
+        self._finished = decisions.finished
+        self._timings_s.update(decisions.timings_s)
+
+    def _matching_cluster(
+        self, goal: FrontierCluster | None, clusters: list[FrontierCluster]
+    ) -> int | None:
+        """The cluster that continues a robot's ``goal``: its target is nearest the old
+        target, within the goal tolerance plus the clusterer's linkage."""
+        if goal is None or not clusters:
             return None
-        targets = np.array([c.target_m for c in self._clusters])
-        gaps = np.linalg.norm(targets - task.cluster.target_m, axis=1)
+        targets = np.array([c.target_m for c in clusters])
+        gaps = np.linalg.norm(targets - goal.target_m, axis=1)
         best = int(np.argmin(gaps))
         tolerance_m = self._config.algorithms.server.goal_tolerance_m + self._clusterer.linkage_m
         return best if gaps[best] <= tolerance_m else None

@@ -10,7 +10,7 @@ the walls cancel, and stay there. Per robot, :class:`Recovery`
    planner: reverse ``recovery_back_off_m`` straight back at ``recovery_back_off_mps``
    (the robot drove in forward, so the way back is free; in the pocket of a dead end
    there is no room to turn), giving up after twice the nominal time if blocked;
-3. then asks the caller to replan A* on :meth:`Recovery.penalize` d costs (higher within
+3. then asks the caller to replan A* on :func:`penalize` d costs (higher within
    ``recovery_penalty_radius_m`` of every trap, so a global path that led into a dead
    end the map does not show leads elsewhere) and to drop the local planner's warm
    start. Turning toward the new path is the local planner's job (FGP turns in place
@@ -22,6 +22,7 @@ the simulator: the server drives it from estimated poses.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,19 +105,24 @@ class Recovery:
         self._back_off_from = (stamp_s, state.xy_m)
         return RecoveryStep(reverse, event=event)
 
-    def penalize(self, cost: np.ndarray, grid: GridSpec) -> np.ndarray:
-        """A copy of the costmap cost with ``recovery_penalty_cost`` added near each trap.
 
-        Lethal cells stay lethal and nothing becomes lethal, so a path still exists
-        through a trap when it is the only way.
-        """
-        penalised = np.array(cost, dtype=float)
-        if not self.traps_xy_m:
-            return penalised
-        centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, dtype=bool)))
-        centres = centres.reshape(*grid.shape, 2)
-        radius_m = self.planning.recovery_penalty_radius_m
-        for trap in self.traps_xy_m:
-            near = np.linalg.norm(centres - trap, axis=-1) <= radius_m
-            penalised[near] += self.planning.recovery_penalty_cost
+def penalize(
+    cost: np.ndarray, grid: GridSpec, traps_xy_m: Sequence[np.ndarray], planning: PlanningConfig
+) -> np.ndarray:
+    """A copy of the costmap cost with ``recovery_penalty_cost`` added near each of a
+    robot's traps (:attr:`Recovery.traps_xy_m`, or a copy taken when a replan was
+    scheduled).
+
+    Lethal cells stay lethal and nothing becomes lethal, so a path still exists
+    through a trap when it is the only way.
+    """
+    penalised = np.array(cost, dtype=float)
+    if not traps_xy_m:
         return penalised
+    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, dtype=bool)))
+    centres = centres.reshape(*grid.shape, 2)
+    radius_m = planning.recovery_penalty_radius_m
+    for trap in traps_xy_m:
+        near = np.linalg.norm(centres - trap, axis=-1) <= radius_m
+        penalised[near] += planning.recovery_penalty_cost
+    return penalised

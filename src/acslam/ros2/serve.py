@@ -3,8 +3,9 @@
 The server waits until each robot's odometry, a scan and the laser mount joining them
 have arrived (robots not ready by ``startup_timeout_s`` start lost), starts each robot's
 estimate at the scenario's start pose, then runs the same loop as every other run
-(:func:`acslam.runner.run_loop`). Whatever ends the run, every robot is sent zero
-velocity. The run folder is written as an in-process run's; the ground truth comes from
+(:func:`acslam.runner.run_loop`), with the map update and the decisions beside it
+(:class:`~acslam.pipeline.jobs.BackgroundJobs`). Whatever ends the run, every robot is
+sent zero velocity. The run folder is written as an in-process run's; the ground truth comes from
 the robots' ``ground_truth`` topics, or is absent (a real team), and then the run is
 scored on what needs no truth.
 """
@@ -22,6 +23,7 @@ import zenoh
 from acslam import runner
 from acslam.errors import TransportError
 from acslam.geometry import compose
+from acslam.pipeline.jobs import BackgroundJobs
 from acslam.pipeline.server import Server
 from acslam.ros2.node import Ros2Node, Ros2Options, open_ros2_session
 from acslam.ros2.source import Ros2Source, Ros2Topics
@@ -88,13 +90,17 @@ def serve_ros2(
             starts = scenario.starts.copy()
             for robot, mount in mounts.items():
                 starts[robot] = compose(scenario.starts[robot], mount)
-            server = Server(scenario.config, starts, scenario.world.spec)
+            server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
             for robot in set(range(len(starts))) - set(mounts):
                 server.mark_lost(robot, 0.0)
             log = runner.RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
-            reason, wall_time_s = runner.run_loop(
-                server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
-            )
+            try:
+                reason, wall_time_s = runner.run_loop(
+                    server, source, log,
+                    max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step,
+                )  # fmt: skip
+            finally:
+                server.close()
         finally:
             source.stop()
         extra = {"ros2": {"robots": list(options.namespaces), **source.statistics()}}

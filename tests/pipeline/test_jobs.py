@@ -1,0 +1,237 @@
+"""The server's heavy work: in the cycle that scheduled it in-process, beside the control
+loop in served runs. An allocator that waits at a gate the test opens stands for one that
+takes long."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import ClassVar, Literal
+
+import numpy as np
+import pytest
+import yaml
+
+from acslam.config import MappingConfig, StageParams
+from acslam.exploration.allocation import Allocation
+from acslam.grid import GridSpec
+from acslam.mapping.costmap import Costmap
+from acslam.mapping.occupancy import TeamMap
+from acslam.pipeline.jobs import BackgroundJobs, InlineJobs, Jobs
+from acslam.pipeline.registry import ALLOCATORS, MAPPERS
+from acslam.pipeline.server import Server
+from acslam.pipeline.snapshot import Snapshot
+from acslam.pipeline.stages import Cells, Clusters, Goals
+from acslam.scenario import Scenario, load_scenario
+from acslam.sources.simulated import SimulatedSource
+
+WAIT_S = 60.0
+"""Longest wait for the worker thread (a bound against a hang, not a timing)."""
+
+
+class GatedParams(StageParams):
+    name: Literal["gated"] = "gated"
+
+
+class GatedAllocator:
+    """Each robot takes the cluster nearest in a straight line, once ``gate`` is open;
+    ``started`` is set when an allocation with clusters begins, ``targets_m`` holds the targets each
+    robot was given. ``error``: raised instead."""
+
+    gate: ClassVar[threading.Event] = threading.Event()
+    started: ClassVar[threading.Event] = threading.Event()
+    error: ClassVar[Exception | None] = None
+    targets_m: ClassVar[list[np.ndarray]] = []
+
+    def __init__(self, params: GatedParams) -> None:
+        self.params = params
+
+    def allocate(
+        self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
+    ) -> Allocation:
+        robots_m = costmap.spec.cell_to_world(np.asarray(robot_cells).reshape(-1, 2))
+        if not clusters:
+            return Allocation("gated", "nearest", (None,) * len(robots_m), np.zeros(0))
+        GatedAllocator.started.set()
+        assert GatedAllocator.gate.wait(WAIT_S)
+        if GatedAllocator.error is not None:
+            raise GatedAllocator.error
+        targets_m = np.array([c.target_m for c in clusters])
+        distances_m = np.linalg.norm(robots_m[:, None] - targets_m[None], axis=2)
+        choice = tuple(int(k) for k in np.argmin(distances_m, axis=1))
+        GatedAllocator.targets_m = [targets_m[k] for k in choice]
+        return Allocation("gated", "nearest", choice, distances_m)
+
+
+@pytest.fixture
+def gated(tiny_scenario: Path) -> Iterator[Scenario]:
+    """The tiny two-room scenario with the gated allocator, the gate shut."""
+    ALLOCATORS.register("gated", GatedParams)(GatedAllocator)
+    GatedAllocator.gate.clear()
+    GatedAllocator.started.clear()
+    GatedAllocator.error = None
+    GatedAllocator.targets_m = []
+    data = yaml.safe_load(tiny_scenario.read_text())
+    data["algorithms"] = {"allocator": {"name": "gated"}}
+    path = tiny_scenario.parent / "gated.yaml"
+    path.write_text(yaml.safe_dump(data))
+    try:
+        yield load_scenario(path)
+    finally:
+        GatedAllocator.gate.set()
+        ALLOCATORS.unregister("gated")
+
+
+class GatedMapParams(MappingConfig):
+    name: Literal["gated-map"] = "gated-map"  # type: ignore[assignment]
+
+
+class GatedMapper(TeamMap):
+    """The log-odds map, whose scans after the first ``open_scans`` wait at ``gate``
+    (a correction that takes long); ``waiting`` is set when one does."""
+
+    made: ClassVar[list[GatedMapper]] = []
+    gate: ClassVar[threading.Event] = threading.Event()
+    waiting: ClassVar[threading.Event] = threading.Event()
+    open_scans: ClassVar[int] = 30
+    handed: ClassVar[int] = 0
+
+    def __init__(self, params: GatedMapParams, *, spec: GridSpec) -> None:
+        super().__init__(params, spec=spec)
+        GatedMapper.made.append(self)
+
+    def add_scan(self, robot_id, scan_key, ranges, angles, pose, range_max_m=np.inf) -> None:
+        GatedMapper.handed += 1
+        if GatedMapper.handed > GatedMapper.open_scans:
+            GatedMapper.waiting.set()
+            assert GatedMapper.gate.wait(WAIT_S)
+        super().add_scan(robot_id, scan_key, ranges, angles, pose, range_max_m)
+
+
+@pytest.fixture
+def gated_map(tiny_scenario: Path) -> Iterator[Scenario]:
+    """The tiny two-room scenario with the gated mapper, the gate shut."""
+    MAPPERS.register("gated-map", GatedMapParams)(GatedMapper)
+    GatedMapper.gate.clear()
+    GatedMapper.waiting.clear()
+    GatedMapper.handed = 0
+    GatedMapper.made.clear()
+    data = yaml.safe_load(tiny_scenario.read_text())
+    data["algorithms"] = {"mapper": {"name": "gated-map"}}
+    path = tiny_scenario.parent / "gated-map.yaml"
+    path.write_text(yaml.safe_dump(data))
+    try:
+        yield load_scenario(path)
+    finally:
+        GatedMapper.gate.set()
+        MAPPERS.unregister("gated-map")
+
+
+class Loop:
+    """The simulator and a server stepped one control period at a time."""
+
+    def __init__(self, scenario: Scenario, jobs: Jobs) -> None:
+        config = scenario.config
+        substeps = round(config.algorithms.planning.control_period_s / config.sim.dt_s)
+        self.source = SimulatedSource(scenario.simulator(), substeps)
+        self.server = Server(config, scenario.starts, scenario.world.spec, jobs)
+
+    def step(self) -> Snapshot:
+        snapshot = self.server.step(self.source.receive(), self.source.time_s)
+        self.source.deliver(snapshot)
+        self.source.advance()
+        return snapshot
+
+
+def start_allocating(loop: Loop) -> None:
+    """Step until an allocation with clusters to give has begun on the worker."""
+    deadline = time.monotonic() + WAIT_S
+    while not GatedAllocator.started.is_set():
+        assert time.monotonic() < deadline
+        loop.step()
+        GatedAllocator.started.wait(0.01)
+
+
+def test_inline_jobs_decide_in_the_cycle_that_scheduled_them(gated: Scenario) -> None:
+    GatedAllocator.gate.set()
+    loop = Loop(gated, InlineJobs())
+    snapshot = loop.step()
+    while not (snapshot.clusters and "allocation" in snapshot.timings_s):
+        assert snapshot.time_s < 10.0
+        snapshot = loop.step()
+    # The first allocation with clusters to give: its goals are in the same cycle.
+    assert len(GatedAllocator.targets_m) == len(snapshot.goals_m)
+    for goal, target in zip(snapshot.goals_m, GatedAllocator.targets_m, strict=True):
+        np.testing.assert_array_equal(goal, target)
+
+
+def test_a_slow_allocation_does_not_hold_back_the_control_loop(gated: Scenario) -> None:
+    loop = Loop(gated, BackgroundJobs())
+    try:
+        start_allocating(loop)
+        # While the allocation waits at the gate, the cycles go on: the map and the
+        # costmap follow the robots' scans, and nobody has a goal yet.
+        waiting = [loop.step() for _ in range(20)]
+        assert all(goal is None for s in waiting for goal in s.goals_m)
+        assert waiting[-1].map.version > waiting[0].map.version
+        assert waiting[-1].costmap is not None
+        assert all("allocation" not in s.timings_s for s in waiting)
+        GatedAllocator.gate.set()
+        deadline = time.monotonic() + WAIT_S
+        snapshot = loop.step()
+        while snapshot.goals_m[0] is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+            snapshot = loop.step()
+        # Taken in the first cycle after the job ended, with the job's own duration:
+        # each robot drives to the target the allocation gave it.
+        assert snapshot.timings_s["allocation"] > 0.0
+        assert len(GatedAllocator.targets_m) == len(snapshot.goals_m)
+        for goal, target in zip(snapshot.goals_m, GatedAllocator.targets_m, strict=True):
+            np.testing.assert_array_equal(goal, target)
+    finally:
+        GatedAllocator.gate.set()
+        loop.server.close()
+
+
+def test_a_failed_job_stops_the_run_in_the_next_cycle(gated: Scenario) -> None:
+    GatedAllocator.error = ValueError("allocation broke")
+    loop = Loop(gated, BackgroundJobs())
+    try:
+        start_allocating(loop)
+        GatedAllocator.gate.set()
+        deadline = time.monotonic() + WAIT_S
+        with pytest.raises(ValueError, match="allocation broke"):
+            while time.monotonic() < deadline:
+                loop.step()
+                time.sleep(0.01)
+    finally:
+        loop.server.close()
+
+
+def test_slow_mapping_does_not_hold_back_the_control_loop_and_loses_no_scan(
+    gated_map: Scenario,
+) -> None:
+    loop = Loop(gated_map, BackgroundJobs())
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while not GatedMapper.waiting.is_set():
+            assert time.monotonic() < deadline
+            loop.step()
+            GatedMapper.waiting.wait(0.01)
+        # The mapper is stuck on a scan: SLAM and the local planner go on, the robots
+        # drive on the last costmap, the map stays as it was.
+        waiting = [loop.step() for _ in range(20)]
+        assert waiting[-1].map.version == waiting[0].map.version
+        moved_m = np.linalg.norm(waiting[-1].poses[:, :2] - waiting[0].poses[:, :2], axis=1)
+        assert moved_m.max() > 0.05
+        assert any(c.v != 0.0 for s in waiting for c in s.commands)
+        handed = GatedMapper.handed
+    finally:
+        GatedMapper.gate.set()
+        loop.server.close()
+    # Closing waits for the queued jobs: every scan handed over is in the map.
+    (mapper,) = GatedMapper.made
+    assert handed > GatedMapper.open_scans
+    assert len(mapper) == GatedMapper.handed
