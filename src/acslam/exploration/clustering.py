@@ -67,7 +67,7 @@ class UnknownDiscCounter:
         return int((self._prefix[r, hi] - self._prefix[r, lo]).sum())
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def dbscan_labels(
     cells: np.ndarray, points_m: np.ndarray, eps_m: float, min_points: int, reach_cells: int
 ) -> np.ndarray:

@@ -108,7 +108,7 @@ def active_radius_m(mapping: MappingConfig) -> float:
 # --------------------------------------------------------------------------- numba kernels
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _find(parent: np.ndarray, a: int) -> int:
     root = a
     while parent[root] != root:
@@ -146,7 +146,7 @@ class EwfdArrays(NamedTuple):
     frontier_list: np.ndarray
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _diff(
     values: np.ndarray,
     values_words: np.ndarray,
@@ -191,7 +191,7 @@ def _diff(
     return count, visited_count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _ring_groups(
     visited: np.ndarray, row: int, col: int, rows: int, cols: int, firsts: np.ndarray
 ) -> int:
@@ -239,7 +239,7 @@ def _ring_groups(
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _next_to_removed(mark: np.ndarray, row: int, col: int, rows: int, cols: int) -> bool:
     """Whether an 8-neighbour of (row, col) is marked removed (-1) in ``mark``."""
     for k in range(8):
@@ -249,7 +249,7 @@ def _next_to_removed(mark: np.ndarray, row: int, col: int, rows: int, cols: int)
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _mark_dirty(flat: int, dirty: np.ndarray, dirty_flag: np.ndarray, n_dirty: int) -> int:
     if dirty_flag[flat] == 0:
         dirty_flag[flat] = 1
@@ -258,7 +258,7 @@ def _mark_dirty(flat: int, dirty: np.ndarray, dirty_flag: np.ndarray, n_dirty: i
     return n_dirty
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _process(
     ewfd: EwfdArrays, n_changed: int, robots: np.ndarray, previous_robots: np.ndarray
 ) -> None:

@@ -75,7 +75,7 @@ class ScanUpdate:
         return self.increments_fixed / FIXED_POINT_SCALE
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _scan_update(
     ranges: np.ndarray,
     angles: np.ndarray,
@@ -196,7 +196,7 @@ def _scan_update(
     return flat_out[:m], delta_out[:m]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _place_rigid(
     source: np.ndarray,
     source_origin_xy_m: tuple[float, float],

@@ -109,7 +109,7 @@ _LETHAL = np.uint8(1)
 _CLOSED = np.uint8(2)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", nogil=True)
 def grid_search(
     cost: np.ndarray,
     cost_weight: float,
@@ -196,7 +196,7 @@ def grid_search(
     return g, step_of, expanded
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _trace(step_of: np.ndarray, goal: int, cols: int) -> np.ndarray:
     """The cells from the start to ``goal``, walking the steps of :func:`grid_search` back."""
     offsets = NEIGHBOUR_ROWS * cols + NEIGHBOUR_COLS
@@ -339,7 +339,7 @@ def snap_to_free(lethal: np.ndarray, cell: tuple[int, int], max_snap_cells: int)
 # --------------------------------------------------------------------------- smoothing
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def line_is_free(lethal: np.ndarray, r0: int, c0: int, r1: int, c1: int) -> bool:
     """True when the segment between two cell centres crosses no lethal cell.
 
@@ -372,7 +372,7 @@ def line_is_free(lethal: np.ndarray, r0: int, c0: int, r1: int, c1: int) -> bool
             err += 2 * dc - 2 * dr
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _shortcut(cells: np.ndarray, lethal: np.ndarray) -> np.ndarray:
     keep = np.zeros(cells.shape[0], dtype=np.bool_)
     keep[0] = True

@@ -66,7 +66,7 @@ class TravelGraph:
         return len(self.node_cells)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _changed_blocks(lethal: np.ndarray, previous: np.ndarray, k: int) -> np.ndarray:
     """Per block, whether any of its cells' lethal flag differs from ``previous``, which it
     brings up to date. Compares eight cells at a time: a map update changes a few rooms,
@@ -88,7 +88,7 @@ def _changed_blocks(lethal: np.ndarray, previous: np.ndarray, k: int) -> np.ndar
     return changed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _label_blocks(
     lethal: np.ndarray,
     k: int,
@@ -154,7 +154,7 @@ def _label_blocks(
         counts[b] = components
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _node_cells(reps: np.ndarray, counts: np.ndarray, starts: np.ndarray, cols: int) -> np.ndarray:
     """(nodes, 2) ``[row, col]`` of every node, block by block."""
     cells = np.empty((starts[-1], 2), dtype=np.int64)
@@ -177,7 +177,7 @@ def _step_allowed(lethal: np.ndarray, r: int, c: int, nr: int, nc: int) -> bool:
 _RIGHT, _DOWN, _DOWN_RIGHT, _DOWN_LEFT = 0, 1, 2, 3
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _add_edge(found: np.ndarray, count: int, a: int, side: int, b: int) -> int:
     """Append the edge to the block's list unless it is there already."""
     for i in range(count):
@@ -189,7 +189,7 @@ def _add_edge(found: np.ndarray, count: int, a: int, side: int, b: int) -> int:
     return count + 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _edges_of_block(
     label: np.ndarray, lethal: np.ndarray, k: int, b: int, found: np.ndarray
 ) -> int:
@@ -231,7 +231,7 @@ def _stale_blocks(changed: np.ndarray, block_cols: int) -> np.ndarray:
     return np.flatnonzero(stale)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _block_edges(
     label: np.ndarray,
     lethal: np.ndarray,
@@ -279,7 +279,7 @@ def _block_edges(
     return offsets, edges[:count]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _node_pairs(
     offsets: np.ndarray, edges: np.ndarray, starts: np.ndarray, block_cols: int
 ) -> np.ndarray:
@@ -296,7 +296,7 @@ def _node_pairs(
     return pairs
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _adjacency(
     edges: np.ndarray, node_cells: np.ndarray, factor: np.ndarray, resolution_m: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -384,7 +384,7 @@ class TravelGraphBuilder:
         )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _box_searches(
     cost: np.ndarray,
     cost_weight: float,
@@ -459,7 +459,7 @@ def _box_searches(
     return offsets, nodes, node_costs, direct
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _search(
     offsets: np.ndarray,
     neighbours: np.ndarray,
@@ -608,7 +608,7 @@ def _distances_to_legs(
     return result
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _join_legs(
     to_legs: np.ndarray, result: np.ndarray, leg_offsets: np.ndarray, leg_costs: np.ndarray
 ) -> None:
