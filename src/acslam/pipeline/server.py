@@ -82,6 +82,7 @@ class _MapProducts:
     """What a map update made of the grid: the known window, its costmap, the frontier
     cells (of the whole grid) and their clusters (of the window)."""
 
+    time_s: float
     values: np.ndarray
     window: Window
     costmap: Costmap
@@ -168,6 +169,7 @@ class Server:
         self._clusters: list[FrontierCluster] = []
         self._mapping_jobs: deque[Future[float]] = deque()
         self._map_job: Future[_MapProducts] | None = None
+        self._map_time_s = -math.inf
         self._decision_job: Future[_Decisions] | None = None
         self._next_map_update_s = 0.0
         self._next_replan_s = 0.0
@@ -244,7 +246,7 @@ class Server:
         if map_update_due:
             self._next_map_update_s = now_s + self._config.algorithms.server.map_update_period_s
             if self._map_job is None:
-                self._map_job = self._jobs.submit(MAP_LANE, self._map_update())
+                self._map_job = self._jobs.submit(MAP_LANE, self._map_update(now_s))
         self._take_map_products()
         poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
         if (self._replan_now or now_s >= self._next_replan_s) and self._decision_job is None:
@@ -301,7 +303,7 @@ class Server:
             seconds += self._mapping_jobs.popleft().result()
         self._timings_s["mapping"] = seconds
 
-    def _map_update(self) -> Callable[[], _MapProducts]:
+    def _map_update(self, now_s: float) -> Callable[[], _MapProducts]:
         """The map update's job, on the grid as the mapping jobs before it leave it, and
         the scans added since the last one (all of the map, after a correction)."""
         robot_cells = self._map_spec.world_to_cell(
@@ -310,9 +312,11 @@ class Server:
         scan_cells = None if self._corrected else np.array(self._new_scan_cells).reshape(-1, 2)
         self._new_scan_cells.clear()
         self._corrected = False
-        return lambda: self._map_products(robot_cells, scan_cells)
+        return lambda: self._map_products(now_s, robot_cells, scan_cells)
 
-    def _map_products(self, robot_cells: np.ndarray, scan_cells: np.ndarray | None) -> _MapProducts:
+    def _map_products(
+        self, now_s: float, robot_cells: np.ndarray, scan_cells: np.ndarray | None
+    ) -> _MapProducts:
         """Costmap of the known window, frontiers, clusters (a job: reads only its
         arguments and the stages jobs alone use)."""
         timings_s: dict[str, float] = {}
@@ -333,7 +337,7 @@ class Server:
             window.to_local(frontier_cells), window.crop(values), window.spec, costmap
         )
         timings_s["frontiers"] = time.perf_counter() - start
-        return _MapProducts(values, window, costmap, frontier_cells, clusters, timings_s)
+        return _MapProducts(now_s, values, window, costmap, frontier_cells, clusters, timings_s)
 
     def _take_map_products(self) -> None:
         job = self._map_job
@@ -341,6 +345,7 @@ class Server:
             return
         self._map_job = None
         products = job.result()
+        self._map_time_s = products.time_s
         self._values, self._window = products.values, products.window
         self._costmap, self._clusters = products.costmap, products.clusters
         self._frontier_cells = products.frontier_cells
@@ -363,16 +368,19 @@ class Server:
             )
             for i in active
         }
-        mapped = len(self._mapper) > 0
+        # Nothing left to explore is a finding only on a map that has begun and on
+        # frontiers at most two map updates old (a served run's map lane may lag).
+        period_s = self._config.algorithms.server.map_update_period_s
+        can_finish = len(self._mapper) > 0 and now_s - self._map_time_s <= 2 * period_s
         poses = poses.copy()
         return lambda: self._decide(
-            poses, now_s, active, tasks, costmap, window, values, clusters, mapped
+            poses, now_s, active, tasks, costmap, window, values, clusters, can_finish
         )
 
     def _decide(
         self, poses: np.ndarray, now_s: float, active: list[int], tasks: dict[int, _TaskState],
         costmap: Costmap, window: Window, values: np.ndarray | None,
-        clusters: list[FrontierCluster], mapped: bool,
+        clusters: list[FrontierCluster], can_finish: bool,
     ) -> _Decisions:  # fmt: skip
         """Assign clusters and plan a global path to each; a robot with none goes idle.
         Once explored, drive the patrol's tour instead, if the scenario asks for one (a
@@ -400,10 +408,10 @@ class Server:
                 idle[i] = None
             else:
                 idle[i] = now_s if tasks[i].idle_since_s is None else tasks[i].idle_since_s
-        # Done once every robot has had nothing to do for a while after the map has begun:
+        # Done once every robot has had nothing to do for a while (``can_finish``):
         # frontiers briefly vanish while a robot stands on the last one it was sent to.
         explored = (
-            mapped
+            can_finish
             and bool(idle)
             and all(s is not None for s in idle.values())
             and now_s - max(s for s in idle.values() if s is not None)
