@@ -89,13 +89,13 @@ class GatedMapParams(MappingConfig):
 
 
 class GatedMapper(TeamMap):
-    """The log-odds map, whose scans after the first ``open_scans`` wait at ``gate``
-    (a correction that takes long); ``waiting`` is set when one does."""
+    """The log-odds map, whose scans after the first ``open_scans`` (None: all) wait at
+    ``gate`` (a correction that takes long); ``waiting`` is set when one does."""
 
     made: ClassVar[list[GatedMapper]] = []
     gate: ClassVar[threading.Event] = threading.Event()
     waiting: ClassVar[threading.Event] = threading.Event()
-    open_scans: ClassVar[int] = 30
+    open_scans: ClassVar[int | None] = None
     handed: ClassVar[int] = 0
 
     def __init__(self, params: GatedMapParams, *, spec: GridSpec) -> None:
@@ -104,7 +104,7 @@ class GatedMapper(TeamMap):
 
     def add_scan(self, robot_id, scan_key, ranges, angles, pose, range_max_m=np.inf) -> None:
         GatedMapper.handed += 1
-        if GatedMapper.handed > GatedMapper.open_scans:
+        if GatedMapper.open_scans is not None and GatedMapper.handed > GatedMapper.open_scans:
             GatedMapper.waiting.set()
             assert GatedMapper.gate.wait(WAIT_S)
         super().add_scan(robot_id, scan_key, ranges, angles, pose, range_max_m)
@@ -117,6 +117,7 @@ def gated_map(tiny_scenario: Path) -> Iterator[Scenario]:
     GatedMapper.gate.clear()
     GatedMapper.waiting.clear()
     GatedMapper.handed = 0
+    GatedMapper.open_scans = None
     GatedMapper.made.clear()
     data = yaml.safe_load(tiny_scenario.read_text())
     data["algorithms"] = {"mapper": {"name": "gated-map"}}
@@ -216,6 +217,10 @@ def test_slow_mapping_does_not_hold_back_the_control_loop_and_loses_no_scan(
     loop = Loop(gated_map, BackgroundJobs())
     try:
         deadline = time.monotonic() + WAIT_S
+        while any(goal is None for goal in loop.step().goals_m):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        GatedMapper.open_scans = GatedMapper.handed
         while not GatedMapper.waiting.is_set():
             assert time.monotonic() < deadline
             loop.step()
@@ -227,11 +232,25 @@ def test_slow_mapping_does_not_hold_back_the_control_loop_and_loses_no_scan(
         moved_m = np.linalg.norm(waiting[-1].poses[:, :2] - waiting[0].poses[:, :2], axis=1)
         assert moved_m.max() > 0.05
         assert any(c.v != 0.0 for s in waiting for c in s.commands)
-        handed = GatedMapper.handed
     finally:
         GatedMapper.gate.set()
         loop.server.close()
     # Closing waits for the queued jobs: every scan handed over is in the map.
     (mapper,) = GatedMapper.made
-    assert handed > GatedMapper.open_scans
-    assert len(mapper) == GatedMapper.handed
+    assert len(mapper) == GatedMapper.handed > GatedMapper.open_scans
+
+
+def test_a_lagging_map_lane_does_not_end_the_exploration(gated_map: Scenario) -> None:
+    # The map lane takes the robots' first scans, then hangs: the frontiers the
+    # decisions see stay those of the first, almost empty map, where nobody has a goal.
+    GatedMapper.open_scans = 3
+    loop = Loop(gated_map, BackgroundJobs())
+    try:
+        finish_after_s = gated_map.config.algorithms.server.finish_after_idle_s
+        snapshots = [loop.step() for _ in range(round(3 * finish_after_s / 0.1))]
+        assert GatedMapper.waiting.is_set()
+        assert all(goal is None for goal in snapshots[-1].goals_m)
+        assert snapshots[-1].explored_s is None and not snapshots[-1].finished
+    finally:
+        GatedMapper.gate.set()
+        loop.server.close()
