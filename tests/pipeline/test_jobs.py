@@ -25,6 +25,7 @@ from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
 from acslam.pipeline.stages import Cells, Clusters, Goals
 from acslam.scenario import Scenario, load_scenario
+from acslam.slam.lidar_constraints import LidarConstraints
 from acslam.sources.simulated import SimulatedSource
 
 WAIT_S = 60.0
@@ -253,4 +254,42 @@ def test_a_lagging_map_lane_does_not_end_the_exploration(gated_map: Scenario) ->
         assert snapshots[-1].explored_s is None and not snapshots[-1].finished
     finally:
         GatedMapper.gate.set()
+        loop.server.close()
+
+
+def test_loop_closures_are_matched_beside_the_control_loop(
+    tiny_scenario: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    gate, started = threading.Event(), threading.Event()
+    match_loop = LidarConstraints._match_loop
+
+    def gated_match_loop(self, a, b, guess, limit_m):
+        started.set()
+        assert gate.wait(WAIT_S)
+        return match_loop(self, a, b, guess, limit_m)
+
+    monkeypatch.setattr(LidarConstraints, "_match_loop", gated_match_loop)
+    loop = Loop(load_scenario(tiny_scenario), BackgroundJobs())
+    localizer = loop.server._localizer
+    try:
+        deadline = time.monotonic() + WAIT_S
+        while not started.is_set():
+            assert time.monotonic() < deadline
+            loop.step()
+            started.wait(0.01)
+        # The robots start side by side: their first keyframes are loop candidates. While
+        # their matching waits, keyframes and iSAM2 updates go on without them.
+        robots = localizer.backend.robot_ids
+        keyframes = sum(localizer.backend.keyframe_count(r) for r in robots)
+        for _ in range(60):
+            loop.step()
+        assert sum(localizer.backend.keyframe_count(r) for r in robots) > keyframes
+        assert localizer.scan_matcher.loops_added == 0
+        gate.set()
+        while localizer.scan_matcher.loops_added == 0:
+            assert time.monotonic() < deadline
+            loop.step()
+            time.sleep(0.01)
+    finally:
+        gate.set()
         loop.server.close()

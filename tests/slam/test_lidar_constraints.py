@@ -90,14 +90,13 @@ def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> N
     lidar = LidarConstraints(ScanMatchingConfig(loop_min_separation_s=10.0))
     tried: list[tuple[int, int]] = []
     expected: list[tuple[int, int]] = []
-    constrain = lidar._constrain
+    match_loop = lidar._match_loop
 
-    def record(slam, a, b, robust, reference=None) -> bool:
-        if robust:
-            tried.append((lidar._entries.index(a), lidar._entries.index(b)))
-        return constrain(slam, a, b, robust, reference)
+    def record(a, b, guess, limit_m):
+        tried.append((lidar._entries.index(a), lidar._entries.index(b)))
+        return match_loop(a, b, guess, limit_m)
 
-    lidar._constrain = record
+    lidar._match_loop = record
     step_rad = 0.1 / radius_m
     for k in range(160):  # 16 m: two laps and a half each
         stamp = k * 0.25

@@ -14,14 +14,14 @@ like the thesis's fixed 40 m x 40 m grid); it never touches simulator ground tru
 costmap and the planners work on the known area's window of the grid
 (:func:`~acslam.mapping.costmap.known_window`).
 
-Mapping, the map update and the decisions (allocation and global plans) are jobs
-(:mod:`acslam.pipeline.jobs`): in-process runs do them in the cycle that scheduled them;
-served runs do them beside the control loop, which keeps localizing and sending the local
-planner's commands meanwhile. A job reads what was handed to it when it was scheduled and
-the stages only its lane's jobs touch, one job at a time in order; its result changes the
-server's state only when the control cycle takes it. Readers of the map outside the
-server (a live view, the run's explored-area samples) may then see a scan half added.
-"""
+Mapping, the map update, the decisions (allocation and global plans) and the localizer's
+loop-closure matching are jobs (:mod:`acslam.pipeline.jobs`): in-process runs do them in
+the cycle that scheduled them; served runs do them beside the control loop, which keeps
+localizing and sending the local planner's commands meanwhile. A job reads what was handed
+to it when it was scheduled and the stages only its lane's jobs touch, one job at a time in
+order; its result changes the server's state only when the control cycle takes it. Readers
+of the map outside the server (a live view, the run's explored-area samples) may then see a
+scan half added."""
 
 from __future__ import annotations
 
@@ -145,6 +145,7 @@ class Server:
             algorithms.localizer,
             scan_matching=algorithms.scan_matching,
             starts={i: np.asarray(s) for i, s in enumerate(starts)},
+            jobs=self._jobs,
         )
         reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
         self._perception = Perception(self._localizer, range(self._robot_count), reach_m)

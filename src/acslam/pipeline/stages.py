@@ -60,7 +60,9 @@ class AssociationResult:
 @runtime_checkable
 class Localizer(Protocol):
     """SLAM for the team. Context: ``scan_matching`` (ScanMatchingConfig), ``starts``
-    (robot id -> start pose).
+    (robot id -> start pose), and from the server ``jobs`` (:mod:`acslam.pipeline.jobs`:
+    where work that may run beside the control loop, such as loop-closure matching, goes;
+    a replay passes none and the work runs at once).
 
     Scans it keeps are numbered: the index names the scan to the mapper, and
     :meth:`scan_pose` / :meth:`moved_scans` tell where it lies now.

@@ -18,6 +18,7 @@ later scans of a keyframe are placed by a match against its first scan, not by o
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,15 @@ class _KeyframeScan:
     stamp_s: float
     scan: PreparedScan
     path_m: float  # the robot's path length from its start to this keyframe (estimated)
+
+
+@dataclass(frozen=True)
+class LoopMatch:
+    """A loop-closure pair and its verified match (None: rejected)."""
+
+    a: _KeyframeScan
+    b: _KeyframeScan
+    result: ScanMatchResult | None
 
 
 class LidarConstraints:
@@ -112,7 +122,7 @@ class LidarConstraints:
         if baseline is not None:
             partners.append((baseline, None))
         for partner, partner_scan in partners:
-            result = self._constrain(slam, partner, self._entries[-1], False, partner_scan)
+            result = self._constrain(slam, partner, self._entries[-1], partner_scan)
             if result is None:
                 self.sequential_rejected += 1
                 continue
@@ -150,8 +160,16 @@ class LidarConstraints:
         return None
 
     def close_loops(self, slam: SlamBackend) -> int:
-        """Match not yet tried pairs of keyframes close in space, nearest first and at most
-        ``MAX_LOOP_ATTEMPTS`` per keyframe; returns how many closures were added.
+        """Search, match and add loop closures at once (:meth:`loop_matches`, then
+        :meth:`add_loops`); returns how many closures were added."""
+        return self.add_loops(slam, self.loop_matches(slam)())
+
+    def loop_matches(self, slam: SlamBackend) -> Callable[[], list[LoopMatch]]:
+        """Not yet tried pairs of keyframes close in space, nearest first and at most
+        ``MAX_LOOP_ATTEMPTS`` per keyframe, as a job that matches them: it reads only the
+        keyframes' prepared scans and the guesses taken now, so it may run beside the
+        control loop while the graph goes on (the closures enter it when
+        :meth:`add_loops` takes them).
 
         The cap is ours: a robot that passes a place many times (or turns on the spot)
         has dozens of candidates per keyframe, and matching them all costs far more than
@@ -163,17 +181,48 @@ class LidarConstraints:
             slam.scans.positions(self._scan_indices[: len(self._entries)]),
             lambda k: slam.scans.pose(self._entries[k].scan_index)[:2],
         )
-        added = 0
+        tries = []
         for earlier, later in pairs:
-            if (
-                self._constrain(slam, self._entries[earlier], self._entries[later], True)
-                is not None
-            ):
-                added += 1
-            else:
+            a, b = self._entries[earlier], self._entries[later]
+            guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
+            way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
+            tries.append((a, b, guess, max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)))
+        return lambda: [
+            LoopMatch(a, b, self._match_loop(a, b, guess, limit_m))
+            for a, b, guess, limit_m in tries
+        ]
+
+    def add_loops(self, slam: SlamBackend, matches: list[LoopMatch]) -> int:
+        """Add the verified loop closures of a :meth:`loop_matches` job to the graph;
+        returns how many."""
+        added = 0
+        for match in matches:
+            if match.result is None:
                 self.loops_rejected += 1
+                continue
+            slam.scans.add_constraint(
+                match.a.scan_index,
+                match.b.scan_index,
+                match.result.relative,
+                match.result.covariance,
+                True,
+            )
+            added += 1
         self.loops_added += added
         return added
+
+    def _match_loop(
+        self, a: _KeyframeScan, b: _KeyframeScan, guess: np.ndarray, limit_m: float
+    ) -> ScanMatchResult | None:
+        """Match b to a from ``guess``: the match if verified and, restarted to either
+        side, it comes back (its covariance then holds any other fit as good)."""
+        result = match_scans(a.scan, b.scan, guess, self.config, guess_from_odometry=False)
+        if not verify(result, guess, self.config, strict=True, max_correction_m=limit_m):
+            return None
+        result = with_restart_spread(a.scan, b.scan, result, self.config)
+        if not verify(result, guess, self.config, max_correction_m=limit_m):
+            return None
+        return result
 
     def _submap(self, slam: SlamBackend, robot_id: int, last: int) -> PreparedScan:
         """Scans of keyframes ``last - submap_keyframes + 1 .. last`` of one robot, in the
@@ -202,39 +251,23 @@ class LidarConstraints:
         slam: SlamBackend,
         a: _KeyframeScan,
         b: _KeyframeScan,
-        robust: bool,
         reference: PreparedScan | None = None,
     ) -> ScanMatchResult | None:
-        """Match b to a (or to ``reference``, a submap in a's frame) and add the factor if
-        the match is verified; returns the match, or None if it was not."""
+        """Match b to a (or to ``reference``, a submap in a's frame), sequential keyframes
+        of one robot, and add the factor if the match is verified and agrees with the
+        odometry between them; returns the match, or None if it was not added."""
         guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
         reference = a.scan if reference is None else reference
-        # A sequential guess is odometry's over a short way; a loop's has drifted.
-        result = match_scans(reference, b.scan, guess, self.config, guess_from_odometry=not robust)
-        limit_m = None
-        odometry_covariance = None
-        if robust:
-            way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
-            limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
-        else:
-            robot_id, since = slam.scans.keyframe(a.scan_index)
-            odometry_covariance = slam.odometry_chain_covariance(
-                robot_id, since, slam.scans.keyframe(b.scan_index)[1]
-            )
+        result = match_scans(reference, b.scan, guess, self.config, guess_from_odometry=True)
+        robot_id, since = slam.scans.keyframe(a.scan_index)
+        odometry_covariance = slam.odometry_chain_covariance(
+            robot_id, since, slam.scans.keyframe(b.scan_index)[1]
+        )
         if not verify(
-            result,
-            guess,
-            self.config,
-            strict=robust,
-            max_correction_m=limit_m,
-            guess_covariance=odometry_covariance,
+            result, guess, self.config, strict=False, guess_covariance=odometry_covariance
         ):
             return None
-        if robust:
-            result = with_restart_spread(reference, b.scan, result, self.config)
-            if not verify(result, guess, self.config, max_correction_m=limit_m):
-                return None
         slam.scans.add_constraint(
-            a.scan_index, b.scan_index, result.relative, result.covariance, robust
+            a.scan_index, b.scan_index, result.relative, result.covariance, False
         )
         return result

@@ -3,17 +3,26 @@
 Odometry and landmarks go to :class:`~acslam.slam.backend.SlamBackend`; each kept scan
 is also matched to its robot's earlier keyframes (and, when the server asks, to nearby
 keyframes for loop closures) by :class:`~acslam.slam.lidar_constraints.LidarConstraints`.
+The loop-closure matches are a job in the ``loops`` lane of the server's
+:mod:`~acslam.pipeline.jobs`: in a served run they run beside the control loop and enter
+the graph in the first update after they end.
 """
 
 from __future__ import annotations
+
+from concurrent.futures import Future
 
 import numpy as np
 
 from acslam.config import ScanMatchingConfig, SlamConfig
 from acslam.messages import LandmarkObservations, LidarScan, OdometryIncrement, RobotSighting
+from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.stages import AssociationResult
 from acslam.slam.backend import SlamBackend
-from acslam.slam.lidar_constraints import LidarConstraints
+from acslam.slam.lidar_constraints import LidarConstraints, LoopMatch
+
+LOOP_LANE = "loops"
+"""The jobs' lane of loop-closure matching (see acslam.pipeline.jobs)."""
 
 # A loop closure is a large correction: Huber reweighting converges over a few more
 # Gauss-Newton steps; at the end of the data, a few more settle the whole estimate.
@@ -30,9 +39,13 @@ class Isam2Localizer:
         *,
         scan_matching: ScanMatchingConfig,
         starts: dict[int, np.ndarray],
+        jobs: Jobs | None = None,
     ) -> None:
+        """``jobs``: where loop-closure matching runs (at once unless given)."""
         self.backend = SlamBackend(params, starts)
         self.scan_matcher = LidarConstraints(scan_matching)
+        self._jobs: Jobs = InlineJobs() if jobs is None else jobs
+        self._loop_job: Future[list[LoopMatch]] | None = None
 
     def add_odometry(self, message: OdometryIncrement) -> None:
         self.backend.add_odometry(message)
@@ -53,10 +66,20 @@ class Isam2Localizer:
         self.scan_matcher.add_scan(self.backend, index, scan, blind_sectors)
 
     def optimize(self, close_loops: bool) -> None:
-        closures = self.scan_matcher.close_loops(self.backend) if close_loops else 0
+        if close_loops and self._loop_job is None:
+            self._loop_job = self._jobs.submit(
+                LOOP_LANE, self.scan_matcher.loop_matches(self.backend)
+            )
+        closures = 0
+        if self._loop_job is not None and self._loop_job.done():
+            closures = self.scan_matcher.add_loops(self.backend, self._loop_job.result())
+            self._loop_job = None
         self.backend.update(extra_iterations=EXTRA_ITERATIONS_AFTER_CLOSURE if closures else 0)
 
     def finish(self) -> None:
+        if self._loop_job is not None:
+            self.scan_matcher.add_loops(self.backend, self._loop_job.result())
+            self._loop_job = None
         self.scan_matcher.close_loops(self.backend)
         self.backend.update(extra_iterations=EXTRA_ITERATIONS_AT_FINISH)
 
