@@ -32,13 +32,22 @@ WAIT_S = 60.0
 """Longest wait for the worker thread (a bound against a hang, not a timing)."""
 
 
+def with_stage(tiny_scenario: Path, kind: str, name: str) -> Scenario:
+    """The tiny two-room scenario with the plugin ``name`` as its ``kind`` stage."""
+    data = yaml.safe_load(tiny_scenario.read_text())
+    data["algorithms"] = {kind: {"name": name}}
+    path = tiny_scenario.parent / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_scenario(path)
+
+
 class GatedParams(StageParams):
     name: Literal["gated"] = "gated"
 
 
 class GatedAllocator:
-    """Each robot takes the cluster nearest in a straight line, once ``gate`` is open;
-    ``started`` is set when an allocation with clusters begins, ``targets_m`` holds the targets each
+    """Robot i takes cluster i (modulo their number), once ``gate`` is open; ``started``
+    is set when an allocation with clusters begins, ``targets_m`` holds the targets each
     robot was given. ``error``: raised instead."""
 
     gate: ClassVar[threading.Event] = threading.Event()
@@ -52,18 +61,16 @@ class GatedAllocator:
     def allocate(
         self, robot_cells: Cells, clusters: Clusters, costmap: Costmap, current: Goals = None
     ) -> Allocation:
-        robots_m = costmap.spec.cell_to_world(np.asarray(robot_cells).reshape(-1, 2))
+        count = len(robot_cells)
         if not clusters:
-            return Allocation("gated", "nearest", (None,) * len(robots_m), np.zeros(0))
+            return Allocation("gated", "in turn", (None,) * count, np.zeros((count, 0)))
         GatedAllocator.started.set()
         assert GatedAllocator.gate.wait(WAIT_S)
         if GatedAllocator.error is not None:
             raise GatedAllocator.error
-        targets_m = np.array([c.target_m for c in clusters])
-        distances_m = np.linalg.norm(robots_m[:, None] - targets_m[None], axis=2)
-        choice = tuple(int(k) for k in np.argmin(distances_m, axis=1))
-        GatedAllocator.targets_m = [targets_m[k] for k in choice]
-        return Allocation("gated", "nearest", choice, distances_m)
+        choice = tuple(i % len(clusters) for i in range(count))
+        GatedAllocator.targets_m = [clusters[k].target_m for k in choice]
+        return Allocation("gated", "in turn", choice, np.zeros((count, len(clusters))))
 
 
 @pytest.fixture
@@ -74,12 +81,8 @@ def gated(tiny_scenario: Path) -> Iterator[Scenario]:
     GatedAllocator.started.clear()
     GatedAllocator.error = None
     GatedAllocator.targets_m = []
-    data = yaml.safe_load(tiny_scenario.read_text())
-    data["algorithms"] = {"allocator": {"name": "gated"}}
-    path = tiny_scenario.parent / "gated.yaml"
-    path.write_text(yaml.safe_dump(data))
     try:
-        yield load_scenario(path)
+        yield with_stage(tiny_scenario, "allocator", "gated")
     finally:
         GatedAllocator.gate.set()
         ALLOCATORS.unregister("gated")
@@ -120,12 +123,8 @@ def gated_map(tiny_scenario: Path) -> Iterator[Scenario]:
     GatedMapper.handed = 0
     GatedMapper.open_scans = None
     GatedMapper.made.clear()
-    data = yaml.safe_load(tiny_scenario.read_text())
-    data["algorithms"] = {"mapper": {"name": "gated-map"}}
-    path = tiny_scenario.parent / "gated-map.yaml"
-    path.write_text(yaml.safe_dump(data))
     try:
-        yield load_scenario(path)
+        yield with_stage(tiny_scenario, "mapper", "gated-map")
     finally:
         GatedMapper.gate.set()
         MAPPERS.unregister("gated-map")
