@@ -79,8 +79,9 @@ class RobotTask:
 
 @dataclass(frozen=True)
 class _MapProducts:
-    """What a map update made of the grid: the known window, its costmap, the frontier
-    cells (of the whole grid) and their clusters (of the window)."""
+    """What the map update scheduled at ``time_s`` made of the grid: the known window,
+    its costmap, the frontier cells (of the whole grid) and their clusters (of the
+    window)."""
 
     time_s: float
     values: np.ndarray
@@ -134,8 +135,9 @@ class Server:
         map_spec: GridSpec,
         jobs: Jobs | None = None,
     ) -> None:
-        """``jobs``: where the map update and the decisions run (in the cycle that
-        schedules them unless given, see :mod:`acslam.pipeline.jobs`)."""
+        """``jobs``: where mapping, the map update, the decisions and loop-closure
+        matching run (in the cycle that schedules them unless given, see
+        :mod:`acslam.pipeline.jobs`)."""
         self._config = config
         self._jobs: Jobs = InlineJobs() if jobs is None else jobs
         algorithms = config.algorithms
