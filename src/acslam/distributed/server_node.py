@@ -1,14 +1,15 @@
 """``acslam serve``: the server in wall-clock time, talking to robots over Zenoh.
 
-Each control period the server steps on whatever arrived since the last one (late
-messages are simply used late), sends commands and publishes its status. The map update
-and the decisions run beside that loop (:class:`~acslam.pipeline.jobs.BackgroundJobs`), so
-a slow allocation delays new goals, not the robots' commands. It starts once
-every robot has sent a heartbeat, at the pose the heartbeat reports: the start pose on a
-fresh run, the robot's own dead-reckoned pose after a server restart (there is no
-persisted state; the restarted server maps afresh from there). A robot whose heartbeats
-stop for ``heartbeat_timeout_s`` is marked lost
-(:meth:`~acslam.pipeline.server.Server.mark_lost`) and ignored from then on.
+Each control period the server steps on whatever arrived since the last one (late messages
+are simply used late), sends commands and publishes its status. Mapping, the map update,
+the decisions and loop-closure matching run beside that loop
+(:class:`~acslam.pipeline.jobs.BackgroundJobs`), so a slow one delays the map, new goals
+or closures, not the robots' commands. It starts once every robot has sent a heartbeat, at
+the pose the heartbeat reports: the start pose on a fresh run, the robot's own
+dead-reckoned pose after a server restart (there is no persisted state; the restarted
+server maps afresh from there). A robot whose heartbeats stop for ``heartbeat_timeout_s``
+is marked lost (:meth:`~acslam.pipeline.server.Server.mark_lost`) and ignored from then
+on.
 
 The run folder is written like an in-process run's (:func:`acslam.runner.finish_run`);
 ground truth comes from the robots' truth side channel, which only this evaluation
