@@ -280,9 +280,10 @@ class Server:
         ]
         if moved:
             self._corrected = True
-        self._mapping_jobs.append(
-            self._jobs.submit(MAP_LANE, lambda: self._map_scans(added, moved))
-        )
+        if added or moved:
+            self._mapping_jobs.append(
+                self._jobs.submit(MAP_LANE, lambda: self._map_scans(added, moved))
+            )
 
     def _map_scans(
         self, added: list[tuple[KeptScan, np.ndarray]], moved: list[tuple[int, np.ndarray]]
@@ -375,7 +376,6 @@ class Server:
         # frontiers at most two map updates old (a served run's map lane may lag).
         period_s = self._config.algorithms.server.map_update_period_s
         can_finish = len(self._mapper) > 0 and now_s - self._map_time_s <= 2 * period_s
-        poses = poses.copy()
         return lambda: self._decide(
             poses, now_s, active, tasks, costmap, window, values, clusters, can_finish
         )
