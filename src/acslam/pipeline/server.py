@@ -80,13 +80,14 @@ class RobotTask:
 @dataclass(frozen=True)
 class _MapProducts:
     """What the map update scheduled at ``time_s`` made of the grid: the known window,
-    its costmap, the frontier cells (of the whole grid) and their clusters (of the
-    window)."""
+    its costmap and the local planners' clearance field on it, the frontier cells (of the
+    whole grid) and their clusters (of the window)."""
 
     time_s: float
     values: np.ndarray
     window: Window
     costmap: Costmap
+    field: DistanceField
     frontier_cells: np.ndarray
     clusters: list[FrontierCluster]
     timings_s: dict[str, float]
@@ -166,6 +167,7 @@ class Server:
         self._new_scan_cells: list[np.ndarray] = []
         self._corrected = False
         self._costmap: Costmap | None = None
+        self._field: DistanceField | None = None
         self._window: Window | None = None
         self._values: np.ndarray | None = None
         self._frontier_cells = np.zeros((0, 2), dtype=np.int64)
@@ -334,6 +336,12 @@ class Server:
             self._config.algorithms.costmap,
             self._config.robots.radius_m,
         )
+        # The distance field is to cell centres, walls are cell squares: half a cell
+        # diagonal less makes the planners' clearance a lower bound of the truth.
+        field = DistanceField(
+            np.maximum(costmap.distance_m - window.spec.resolution_m / math.sqrt(2.0), 0.0),
+            window.spec,
+        )
         timings_s["costmap"] = time.perf_counter() - start
         start = time.perf_counter()
         frontier_cells = self._frontier_detector.update(values, robot_cells, scan_cells)
@@ -341,7 +349,9 @@ class Server:
             window.to_local(frontier_cells), window.crop(values), window.spec, costmap
         )
         timings_s["frontiers"] = time.perf_counter() - start
-        return _MapProducts(now_s, values, window, costmap, frontier_cells, clusters, timings_s)
+        return _MapProducts(
+            now_s, values, window, costmap, field, frontier_cells, clusters, timings_s
+        )
 
     def _take_map_products(self) -> None:
         job = self._map_job
@@ -351,7 +361,8 @@ class Server:
         products = job.result()
         self._map_time_s = products.time_s
         self._values, self._window = products.values, products.window
-        self._costmap, self._clusters = products.costmap, products.clusters
+        self._costmap, self._field = products.costmap, products.field
+        self._clusters = products.clusters
         self._frontier_cells = products.frontier_cells
         self._timings_s.update(products.timings_s)
 
@@ -512,17 +523,11 @@ class Server:
 
     def _local_plan(self, poses: np.ndarray, now_s: float) -> list[tuple[float, float]]:
         """(v, omega) for every robot: recovery overrides, else the local planner."""
-        costmap, window = self._costmap, self._window
-        if costmap is None or window is None:
+        field = self._field
+        if field is None:
             return [(0.0, 0.0)] * self._robot_count
         planning = self._config.algorithms.planning
         tolerance = self._config.algorithms.server.goal_tolerance_m
-        # The distance field is to cell centres, walls are cell squares: half a cell
-        # diagonal less makes the planners' clearance a lower bound of the truth.
-        res = window.spec.resolution_m
-        field = DistanceField(
-            np.maximum(costmap.distance_m - res / math.sqrt(2.0), 0.0), window.spec
-        )
         reach_m = planning.horizon_s * self._config.robots.max_v_mps
         # Every robot takes part, so the others plan around it: a robot without a path
         # holds its position as its goal (and yields if another one comes close).
