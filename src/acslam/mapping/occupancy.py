@@ -205,10 +205,11 @@ def _place_rigid(
     target_origin_xy_m: tuple[float, float],
     resolution_m: float,
     sign: int,
-) -> None:
+) -> tuple[int, int, int, int]:
     """Add ``sign`` x ``source`` moved by the rigid ``transform`` = (cos, sin, tx, ty) into
     ``target``: every target cell whose centre maps back into the source takes the source
-    cell it lands in (nearest-cell inverse mapping: no holes under rotation)."""
+    cell it lands in (nearest-cell inverse mapping: no holes under rotation). Returns the
+    target rows and columns it visited, ``(row_start, row_stop, col_start, col_stop)``."""
     cos_t, sin_t, tx_m, ty_m = transform
     sx_m, sy_m = source_origin_xy_m
     gx_m, gy_m = target_origin_xy_m
@@ -234,6 +235,7 @@ def _place_rigid(
             sr = math.floor((cos_t * dy - sin_t * dx - sy_m) / resolution_m)
             if 0 <= sr < rows and 0 <= sc < cols and source[sr, sc] != 0:
                 target[r, c] += sign * source[sr, sc]
+    return r_start, r_stop, c_start, c_stop
 
 
 class LogOddsGrid:
@@ -373,14 +375,15 @@ class LogOddsGrid:
         source_origin_xy_m: tuple[float, float],
         transform: tuple[float, float, float, float],
         sign: int,
-    ) -> None:
+    ) -> tuple[int, int, int, int]:
         """Add (``sign=+1``) or exactly remove (``-1``) another accumulator at this grid's
         resolution, moved by the rigid ``transform`` (cos, sin, tx, ty). The identity
-        copies it cell for cell when both grids' cells are aligned."""
+        copies it cell for cell when both grids' cells are aligned. Returns the rows and
+        columns it may have changed, ``(row_start, row_stop, col_start, col_stop)``."""
         if sign not in (1, -1):
             raise ValueError(f"sign must be +1 or -1, got {sign!r}")
         spec = self.spec
-        _place_rigid(
+        return _place_rigid(
             source_fixed,
             source_origin_xy_m,
             transform,
@@ -403,10 +406,10 @@ class LogOddsGrid:
             self.scan_update(scan_ranges, scan_angles, sensor_pose_xytheta, range_max_m), sign
         )
 
-    def log_odds(self) -> np.ndarray:
-        """Clamped log-odds L of every cell (float64)."""
+    def log_odds(self, rows: slice = slice(None), cols: slice = slice(None)) -> np.ndarray:
+        """Clamped log-odds L of every cell (float64), or of the block ``rows, cols``."""
         return np.clip(
-            self._accumulator * (1.0 / FIXED_POINT_SCALE),
+            self._accumulator[rows, cols] * (1.0 / FIXED_POINT_SCALE),
             self.config.log_odds_min,
             self.config.log_odds_max,
         )
@@ -415,11 +418,14 @@ class LogOddsGrid:
         """Occupancy probability 1 / (1 + exp(-L)) of every cell (eq. 4.26)."""
         return 1.0 / (1.0 + np.exp(-self.log_odds()))
 
-    def to_occupancy_values(self) -> np.ndarray:
+    def to_occupancy_values(
+        self, rows: slice = slice(None), cols: slice = slice(None)
+    ) -> np.ndarray:
         """int8 OccupancyGrid values: 100 if p >= occupied_probability, 0 if p <=
-        free_probability, -1 otherwise (compared in log-odds, the same test)."""
-        log_odds = self.log_odds()
-        values = np.full(self.spec.shape, UNKNOWN, dtype=np.int8)
+        free_probability, -1 otherwise (compared in log-odds, the same test); of every
+        cell, or of the block ``rows, cols``."""
+        log_odds = self.log_odds(rows, cols)
+        values = np.full(log_odds.shape, UNKNOWN, dtype=np.int8)
         values[log_odds <= self._free_log_odds] = FREE
         values[log_odds >= self._occupied_log_odds] = OCCUPIED
         return values
@@ -455,6 +461,9 @@ class FusedGrids:
         self._robot_grids: dict[int, LogOddsGrid] = {}
         self._version = 0
         self._values: tuple[int, np.ndarray] | None = None
+        self._changed: tuple[int, int, int, int] | None = None
+        """Rows and columns of the global grid changed since ``_values`` was computed,
+        ``(row_start, row_stop, col_start, col_stop)``; None: none."""
 
     @property
     def version(self) -> int:
@@ -462,12 +471,34 @@ class FusedGrids:
         return self._version
 
     def occupancy_values(self) -> np.ndarray:
-        """The global grid as read-only OccupancyGrid values, computed once per version."""
-        if self._values is None or self._values[0] != self._version:
+        """The global grid as read-only OccupancyGrid values, computed once per version.
+
+        Only the block the changes since the last call touched is classified again, so
+        a map update costs the area that changed (and a copy), not the whole grid.
+        """
+        if self._values is None:
             values = self.global_grid.to_occupancy_values()
-            values.flags.writeable = False
-            self._values = (self._version, values)
-        return self._values[1]
+        elif self._values[0] != self._version:
+            values = self._values[1].copy()
+            if self._changed is not None:
+                r0, r1, c0, c1 = self._changed
+                rows, cols = slice(r0, r1), slice(c0, c1)
+                values[rows, cols] = self.global_grid.to_occupancy_values(rows, cols)
+        else:
+            return self._values[1]
+        values.flags.writeable = False
+        self._values, self._changed = (self._version, values), None
+        return values
+
+    def _mark_changed(self, row_start: int, row_stop: int, col_start: int, col_stop: int) -> None:
+        """Widen the block of changed global cells (see ``occupancy_values``)."""
+        if row_start >= row_stop or col_start >= col_stop:
+            return
+        if self._changed is not None:
+            r0, r1, c0, c1 = self._changed
+            row_start, row_stop = min(row_start, r0), max(row_stop, r1)
+            col_start, col_stop = min(col_start, c0), max(col_stop, c1)
+        self._changed = (row_start, row_stop, col_start, col_stop)
 
     def known_mask(self) -> np.ndarray:
         return self.global_grid.known_mask()
@@ -497,6 +528,11 @@ class FusedGrids:
         """Add or remove one scan update in the global grid and the robot's grid."""
         self.global_grid.apply(update, sign)
         self.robot_grid(robot_id).apply(update, sign)
+        if len(update.flat_indices):
+            rows, cols = np.divmod(update.flat_indices, self.spec.cols)
+            self._mark_changed(
+                int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
+            )
         self._version += 1
 
 

@@ -182,5 +182,9 @@ class SubmapTeamMap(FusedGrids):
         if submap.accumulator.size == 0:
             return
         transform = rigid_transform(submap.built_anchor, submap.placed_anchor)
-        for grid in (self.global_grid, self.robot_grid(submap.robot_id)):
-            grid.place(submap.accumulator, submap.origin_xy_m, transform, sign)
+        self.robot_grid(submap.robot_id).place(
+            submap.accumulator, submap.origin_xy_m, transform, sign
+        )
+        self._mark_changed(
+            *self.global_grid.place(submap.accumulator, submap.origin_xy_m, transform, sign)
+        )
