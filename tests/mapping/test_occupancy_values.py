@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from acslam.mapping.occupancy import TeamMap, grid_spec_for_bounds
+from acslam.mapping.occupancy import FusedGrids, TeamMap, grid_spec_for_bounds
 from acslam.mapping.params import SubmapMappingConfig
 from acslam.mapping.submaps import SubmapTeamMap
 
@@ -16,7 +16,7 @@ ANGLES = np.linspace(-np.pi, np.pi, 72, endpoint=False)
 
 
 @pytest.mark.parametrize("mapper", [TeamMap, SubmapTeamMap])
-def test_values_follow_every_added_and_moved_scan(mapper) -> None:
+def test_values_follow_every_added_and_moved_scan(mapper: type[FusedGrids]) -> None:
     rng = np.random.default_rng(5)
     team = mapper(CONFIG, spec=SPEC)
     poses: dict[int, np.ndarray] = {}
