@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Hashable, Iterable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -73,6 +74,20 @@ class ScanUpdate:
     def log_odds_increments(self) -> np.ndarray:
         """The increments in log-odds units (for inspection and tests)."""
         return self.increments_fixed / FIXED_POINT_SCALE
+
+    @cached_property
+    def cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rows and columns of ``flat_indices``."""
+        return np.divmod(self.flat_indices, self.grid_shape[1])
+
+    @cached_property
+    def block(self) -> tuple[int, int, int, int] | None:
+        """``(row_start, row_stop, col_start, col_stop)`` around the cells it changes;
+        None if it changes none."""
+        if len(self.flat_indices) == 0:
+            return None
+        rows, cols = self.cells
+        return int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
 
 
 @numba.njit(cache=True, nogil=True)
@@ -528,11 +543,8 @@ class FusedGrids:
         """Add or remove one scan update in the global grid and the robot's grid."""
         self.global_grid.apply(update, sign)
         self.robot_grid(robot_id).apply(update, sign)
-        if len(update.flat_indices):
-            rows, cols = np.divmod(update.flat_indices, self.spec.cols)
-            self._mark_changed(
-                int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
-            )
+        if update.block is not None:
+            self._mark_changed(*update.block)
         self._version += 1
 
 

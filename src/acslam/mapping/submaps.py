@@ -95,18 +95,19 @@ class SubmapTeamMap(FusedGrids):
         submap = self._submap_for(int(robot_id), int(index), pose)
         update = self.global_grid.scan_update(ranges, angles, pose, range_max_m)
         self._apply(int(robot_id), update, 1)
-        rows, cols = np.divmod(update.flat_indices, self.spec.cols)
         r0, c0 = submap.first_cell
-        rows, cols = rows - r0, cols - c0
         local = submap.accumulator
-        if len(rows) and not (
-            rows.min() >= 0
-            and cols.min() >= 0
-            and rows.max() < local.shape[0]
-            and cols.max() < local.shape[1]
-        ):
-            raise ValueError(f"scan {index} changes cells outside its submap's window")
-        local[rows, cols] += update.increments_fixed  # flat indices are unique
+        if update.block is not None:
+            row_start, row_stop, col_start, col_stop = update.block
+            if not (
+                row_start >= r0
+                and col_start >= c0
+                and row_stop - r0 <= local.shape[0]
+                and col_stop - c0 <= local.shape[1]
+            ):
+                raise ValueError(f"scan {index} changes cells outside its submap's window")
+        rows, cols = update.cells
+        local[rows - r0, cols - c0] += update.increments_fixed  # flat indices are unique
         submap.scans += 1
         self._scan_count += 1
 
