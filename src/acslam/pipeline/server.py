@@ -64,6 +64,13 @@ MAP_LANE = "map"
 """Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
 DECISION_LANE = "decisions"
 """Jobs of the allocator and the global planner."""
+SCHEDULE_TOLERANCE_S = 1e-6
+"""A cycle this close before a due time is on time: due times are sums of periods and
+cycle times multiples of the control period, whose float sums differ in the last bits."""
+
+
+def _due(now_s: float, due_s: float) -> bool:
+    return now_s >= due_s - SCHEDULE_TOLERANCE_S
 
 
 @dataclass
@@ -243,7 +250,7 @@ class Server:
             self._timings_s[stage] = time.perf_counter() - start
 
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[tuple[float, float]]:
-        map_update_due = now_s >= self._next_map_update_s
+        map_update_due = _due(now_s, self._next_map_update_s)
         with self._timed("slam"):
             scans = self._perception.localize(messages, close_loops=map_update_due).scans
         self._integrate(scans)
@@ -254,7 +261,7 @@ class Server:
                 self._map_job = self._jobs.submit(MAP_LANE, self._map_update(now_s))
         self._take_map_products()
         poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
-        if (self._replan_now or now_s >= self._next_replan_s) and self._decision_job is None:
+        if (self._replan_now or _due(now_s, self._next_replan_s)) and self._decision_job is None:
             if self._costmap is None:
                 self._timings_s["allocation"] = 0.0
             else:
