@@ -9,12 +9,13 @@ from typing import ClassVar, Literal
 import numpy as np
 import pytest
 
-from acslam.config import MappingConfig, parse_scenario
+from acslam.config import MappingConfig, SlamConfig, parse_scenario
 from acslam.grid import GridSpec
 from acslam.mapping.occupancy import TeamMap
 from acslam.messages import LidarScan
-from acslam.pipeline.registry import MAPPERS
+from acslam.pipeline.registry import LOCALIZERS, MAPPERS
 from acslam.pipeline.server import Server
+from acslam.slam.localizer import Isam2Localizer
 
 
 class RecordingParams(MappingConfig):
@@ -55,3 +56,50 @@ def test_the_mapper_gets_each_scans_own_sensor_range(recording_mapper: None) -> 
     server.step([scan], 0.0)
     (mapper,) = RecordingMapper.made
     assert mapper.range_max_m == [3.5]
+
+
+class RecordingLocalizerParams(SlamConfig):
+    name: Literal["recording"] = "recording"  # type: ignore[assignment]
+
+
+class RecordingLocalizer(Isam2Localizer):
+    """The iSAM2 localizer, remembering which of its optimizations searched for loops."""
+
+    made: ClassVar[list[RecordingLocalizer]] = []
+
+    def __init__(self, params: RecordingLocalizerParams, **kwargs) -> None:
+        super().__init__(params, **kwargs)
+        self.loop_searches: list[bool] = []
+        RecordingLocalizer.made.append(self)
+
+    def optimize(self, close_loops: bool) -> None:
+        self.loop_searches.append(close_loops)
+        super().optimize(close_loops)
+
+
+@pytest.fixture
+def recording_localizer() -> Iterator[None]:
+    LOCALIZERS.register("recording", RecordingLocalizerParams)(RecordingLocalizer)
+    yield
+    LOCALIZERS.unregister("recording")
+
+
+def test_map_updates_and_loop_searches_keep_their_period_in_different_cycles(
+    recording_localizer: None,
+) -> None:
+    """0.1 s cycles, both periods 0.5 s: map updates in every 5th cycle from the first,
+    loop searches in every 5th from the third, over 300 s (float sums of 0.1 s drift off
+    exact tenths by then)."""
+    config = parse_scenario(
+        {"world": {"generator": "dungeon"}, "algorithms": {"localizer": {"name": "recording"}}},
+        "x.yaml",
+    )
+    server = Server(config, np.zeros((1, 3)), GridSpec(-5.0, -5.0, 0.05, 200, 200))
+    map_updates = []
+    for cycle in range(3000):
+        snapshot = server.step([], cycle * config.algorithms.planning.control_period_s)
+        map_updates.append("costmap" in snapshot.timings_s)
+    (localizer,) = RecordingLocalizer.made
+    cycles = np.arange(3000)
+    assert np.array_equal(np.flatnonzero(map_updates), cycles[cycles % 5 == 0])
+    assert np.array_equal(np.flatnonzero(localizer.loop_searches), cycles[cycles % 5 == 3])
