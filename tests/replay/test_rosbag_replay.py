@@ -23,6 +23,7 @@ from acslam.ros2.bag import BagReader, BagWriter
 from acslam.ros2.record import BagRecorder
 from acslam.runner import RunHooks, run_exploration
 from acslam.scenario import load_scenario
+from acslam.slam.localizer import Isam2Localizer
 from acslam.sources.recorded import RecordedSource
 from acslam.trajectory import read_tum
 
@@ -39,11 +40,26 @@ def _signature(batch: list[RobotMessage]) -> list[tuple[str, int, float]]:
     return [(type(m).__name__, m.robot_id, round(m.stamp, 6)) for m in batch]
 
 
-def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp_path: Path):
+def test_a_recorded_run_replays_to_its_own_trajectories(
+    tiny_scenario: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
     """Two robots explore for 15 s with ``--record``'s recorder on; the bag replays in the
-    batches the server received and, stopping where the run stopped (no final loop search
-    and settling, which a live run never does), to the run's keyframe trajectories, to
-    1 mm."""
+    batches the server received, searching for loop closures in the same batches, and,
+    stopping where the run stopped (no final loop search and settling, which a live run
+    never does), to the run's keyframe trajectories, to 5 mm and 5 mrad.
+
+    Not closer: the bag holds ranges and landmark points as float32, the run had them as
+    float64. The odometry calibration turns that into turn-scale estimates 1e-3 apart by
+    the end of the run, and the last keyframes of a robot 3 mm apart (all others within
+    0.3 mm), depending on when the closures entered."""
+    loop_searches: dict[int, list[bool]] = {}
+    optimize = Isam2Localizer.optimize
+
+    def recording_optimize(self: Isam2Localizer, close_loops: bool) -> None:
+        loop_searches.setdefault(id(self), []).append(close_loops)
+        optimize(self, close_loops)
+
+    monkeypatch.setattr(Isam2Localizer, "optimize", recording_optimize)
     scenario = load_scenario(tiny_scenario, robots=2)
     bag_path = tmp_path / "run.mcap"
     recorder = BagRecorder(bag_path, scenario)
@@ -76,6 +92,8 @@ def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp
         source.advance()
     assert replay.start_s == 0.0
     assert replayed == received[: len(replayed)] and len(replayed) >= RUN_S / period_s - 1
+    run_searches, replay_searches = loop_searches.values()
+    assert any(replay_searches) and replay_searches == run_searches[: len(replay_searches)]
 
     for robot in (0, 1):
         name = f"robot_{robot}"
@@ -84,8 +102,8 @@ def test_a_recorded_run_replays_to_its_own_trajectories(tiny_scenario: Path, tmp
         assert len(stamps) >= 10 and np.allclose(stamps, replay_stamps, atol=1e-6)
         error_m = np.hypot(*(poses[:, :2] - replay_poses[:, :2]).T)
         print(f"{name}: {len(stamps)} keyframes, max difference {error_m.max() * 1e3:.4f} mm")
-        assert error_m.max() < 1e-3
-        assert np.abs(wrap_angles(poses[:, 2] - replay_poses[:, 2])).max() < 1e-3
+        assert error_m.max() < 5e-3
+        assert np.abs(wrap_angles(poses[:, 2] - replay_poses[:, 2])).max() < 5e-3
         assert np.hypot(*np.ptp(poses[:, :2], axis=0)) > 1.0  # the robot went somewhere
 
 

@@ -16,6 +16,7 @@ from acslam.messages import (
     RobotSighting,
 )
 from acslam.pipeline.stages import AssociationResult, Localizer
+from acslam.schedule import is_due
 
 
 @dataclass(frozen=True)
@@ -48,13 +49,22 @@ class Perception:
     expect this scan to have seen what stood behind them.
     """
 
-    def __init__(self, localizer: Localizer, robot_ids: Iterable[int], robot_reach_m: float):
+    def __init__(
+        self,
+        localizer: Localizer,
+        robot_ids: Iterable[int],
+        robot_reach_m: float,
+        loop_search_period_s: float,
+    ) -> None:
         self.localizer = localizer
         self.robot_ids = list(robot_ids)
         self.robot_reach_m = robot_reach_m
+        self.loop_search_period_s = loop_search_period_s
+        self._next_loop_search_s: float | None = None
 
-    def localize(self, messages: Iterable[RobotMessage], close_loops: bool) -> Localized:
-        """Ingest, match the new scans, optimize; returns the kept scans for the mapper."""
+    def localize(self, messages: Iterable[RobotMessage], now_s: float) -> Localized:
+        """Ingest, match the new scans, optimize (searching for loop closures when due);
+        returns the kept scans for the mapper."""
         received: list[tuple[int, LidarScan]] = []
         landmarks = []
         for message in messages:
@@ -73,8 +83,20 @@ class Perception:
         ]
         for scan in scans:
             self.localizer.match_scan(scan.index, scan.mappable, scan.blind_sectors)
-        self.localizer.optimize(close_loops=close_loops)
+        self.localizer.optimize(close_loops=self._loop_search_due(now_s))
         return Localized(scans, landmarks)
+
+    def _loop_search_due(self, now_s: float) -> bool:
+        """Every ``loop_search_period_s`` from half a period after the first batch: the
+        server's map update has the same period from the first cycle, and the two
+        heaviest parts of a cycle (loop matching with iSAM2's extra iterations, and the
+        costmap with frontiers) then fall in different cycles."""
+        if self._next_loop_search_s is None:
+            self._next_loop_search_s = now_s + 0.5 * self.loop_search_period_s
+        if not is_due(now_s, self._next_loop_search_s):
+            return False
+        self._next_loop_search_s = now_s + self.loop_search_period_s
+        return True
 
     def _kept(self, index: int, scan: LidarScan, pose: np.ndarray) -> KeptScan:
         valid = scan.ranges > 0

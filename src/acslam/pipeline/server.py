@@ -58,19 +58,13 @@ from acslam.pipeline.snapshot import LocalizationView, MapView, Snapshot
 from acslam.planning.astar import lookahead_point, remaining_length_m
 from acslam.planning.field import DistanceField, RobotState
 from acslam.planning.recovery import Recovery, penalize
+from acslam.schedule import is_due
 
 TEAM_FRAME = "map"
 MAP_LANE = "map"
 """Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
 DECISION_LANE = "decisions"
 """Jobs of the allocator and the global planner."""
-SCHEDULE_TOLERANCE_S = 1e-6
-"""A cycle this close before a due time is on time: due times are sums of periods and
-cycle times multiples of the control period, whose float sums differ in the last bits."""
-
-
-def _due(now_s: float, due_s: float) -> bool:
-    return now_s >= due_s - SCHEDULE_TOLERANCE_S
 
 
 @dataclass
@@ -158,7 +152,12 @@ class Server:
             jobs=self._jobs,
         )
         reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
-        self._perception = Perception(self._localizer, range(self._robot_count), reach_m)
+        self._perception = Perception(
+            self._localizer,
+            range(self._robot_count),
+            reach_m,
+            config.algorithms.server.map_update_period_s,
+        )
         self._mapper = MAPPERS.create(algorithms.mapper, spec=map_spec)
         self._frontier_detector = FRONTIER_DETECTORS.create(
             algorithms.frontier_detector, spec=map_spec, mapping=algorithms.mapper
@@ -184,10 +183,6 @@ class Server:
         self._map_time_s = -math.inf
         self._decision_job: Future[_Decisions] | None = None
         self._next_map_update_s = 0.0
-        # Loop-closure searches keep the map update's period half a period after it, so
-        # the two heaviest parts of a cycle (matching with iSAM2's extra iterations, and
-        # costmap with frontiers) fall in different cycles.
-        self._next_loop_search_s = 0.5 * config.algorithms.server.map_update_period_s
         self._next_replan_s = 0.0
         self._replan_now = True
         self._finished = False
@@ -254,22 +249,18 @@ class Server:
             self._timings_s[stage] = time.perf_counter() - start
 
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[tuple[float, float]]:
-        period_s = self._config.algorithms.server.map_update_period_s
-        map_update_due = _due(now_s, self._next_map_update_s)
-        loop_search_due = _due(now_s, self._next_loop_search_s)
+        map_update_due = is_due(now_s, self._next_map_update_s)
         with self._timed("slam"):
-            scans = self._perception.localize(messages, close_loops=loop_search_due).scans
-        if loop_search_due:
-            self._next_loop_search_s = now_s + period_s
+            scans = self._perception.localize(messages, now_s).scans
         self._integrate(scans)
         self._take_mapping()
         if map_update_due:
-            self._next_map_update_s = now_s + period_s
+            self._next_map_update_s = now_s + self._config.algorithms.server.map_update_period_s
             if self._map_job is None:
                 self._map_job = self._jobs.submit(MAP_LANE, self._map_update(now_s))
         self._take_map_products()
         poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
-        if (self._replan_now or _due(now_s, self._next_replan_s)) and self._decision_job is None:
+        if (self._replan_now or is_due(now_s, self._next_replan_s)) and self._decision_job is None:
             if self._costmap is None:
                 self._timings_s["allocation"] = 0.0
             else:

@@ -3,14 +3,13 @@ localizer stage as ``acslam run``, scored against what the recording provides.
 
 :func:`localize` is the loop every replay shares: the recording plays as a
 :class:`~acslam.sources.recorded.RecordedSource`, in the batches the server receives from
-a live team, into :class:`~acslam.pipeline.perception.Perception`, with the loop-closure
-search every map-update period from the first step, as the server schedules it. Presets
+a live team, into :class:`~acslam.pipeline.perception.Perception`, which searches for
+loop closures every map-update period as in the server. Presets
 of tuned algorithms for a kind of recording are YAML files in ``presets/``.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
@@ -24,7 +23,7 @@ from acslam.messages import LandmarkObservations, RobotMessage
 from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import LOCALIZERS
 from acslam.pipeline.stages import AssociationResult, Localizer
-from acslam.sources.recorded import STAMP_TOLERANCE_S, RecordedSource
+from acslam.sources.recorded import RecordedSource
 
 
 def preset(name: str) -> AlgorithmsConfig:
@@ -75,16 +74,12 @@ def localize(
         algorithms.localizer, scan_matching=algorithms.scan_matching, starts=starts
     )
     reach_m = RobotsConfig().radius_m + algorithms.server.robot_filter_margin_m
-    perception = Perception(localizer, starts, reach_m)
+    perception = Perception(localizer, starts, reach_m, algorithms.server.map_update_period_s)
     source = RecordedSource(messages, algorithms.planning.control_period_s, start_s)
     scans: list[KeptScan] = []
     landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]] = []
-    next_search_s = -math.inf
     while not source.finished:
-        search = source.time_s >= next_search_s - STAMP_TOLERANCE_S
-        if search:
-            next_search_s = source.time_s + algorithms.server.map_update_period_s
-        localized = perception.localize(source.receive(), close_loops=search)
+        localized = perception.localize(source.receive(), source.time_s)
         scans += localized.scans
         landmarks += localized.landmarks
         source.advance()

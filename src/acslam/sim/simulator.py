@@ -34,6 +34,7 @@ import numpy as np
 from acslam.config import RobotsConfig, SensorsConfig, SimConfig
 from acslam.errors import ConfigError
 from acslam.messages import RobotMessage, VelocityCommand
+from acslam.schedule import is_due
 from acslam.seeding import Stream, rng
 from acslam.sim.camera import CameraSensor
 from acslam.sim.kinematics import limit_command, step_pose
@@ -42,7 +43,6 @@ from acslam.sim.odometry import OdometryModel
 from acslam.worlds.world import World
 
 CONTACT_RELEASE_CELLS = 2.0
-_DUE_TOLERANCE_S = 1e-9  # sensor due times accumulate float error over long runs
 
 
 @dataclass
@@ -134,7 +134,7 @@ class _Schedule:
         self.next_due_s = self.period_s
 
     def due(self, time_s: float) -> bool:
-        if time_s + _DUE_TOLERANCE_S < self.next_due_s:
+        if not is_due(time_s, self.next_due_s):
             return False
         self.next_due_s += self.period_s
         return True
