@@ -4,8 +4,8 @@ localizer stage as ``acslam run``, scored against what the recording provides.
 :func:`localize` is the loop every replay shares: the recording plays as a
 :class:`~acslam.sources.recorded.RecordedSource`, in the batches the server receives from
 a live team, into :class:`~acslam.pipeline.perception.Perception`, which searches for
-loop closures every map-update period as in the server. Presets
-of tuned algorithms for a kind of recording are YAML files in ``presets/``.
+loop closures every map-update period as in the server. Presets of tuned algorithms for a
+kind of recording are YAML files in ``presets/``.
 """
 
 from __future__ import annotations
