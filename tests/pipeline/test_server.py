@@ -87,9 +87,9 @@ def recording_localizer() -> Iterator[None]:
 def test_map_updates_and_loop_searches_keep_their_period_in_different_cycles(
     recording_localizer: None,
 ) -> None:
-    """0.1 s cycles, both periods 0.5 s: map updates in every 5th cycle from the first,
-    loop searches in every 5th from the third, over 300 s (float sums of 0.1 s drift off
-    exact tenths by then)."""
+    """0.1 s cycles, both periods 0.5 s: map updates in cycles 0, 5, 10, ..., loop
+    searches in cycles 3, 8, 13, ..., over 300 s (float sums of 0.1 s drift off exact
+    tenths by then)."""
     config = parse_scenario(
         {"world": {"generator": "dungeon"}, "algorithms": {"localizer": {"name": "recording"}}},
         "x.yaml",
