@@ -13,3 +13,22 @@ SCHEDULE_TOLERANCE_S = 1e-6
 def is_due(now_s: float, due_s: float) -> bool:
     """Whether work due at ``due_s`` runs in the step at ``now_s``."""
     return now_s >= due_s - SCHEDULE_TOLERANCE_S
+
+
+class Periodic:
+    """Work due every ``period_s``: first ``offset_s`` after the first step it is asked
+    about, then a period after each step it ran in."""
+
+    def __init__(self, period_s: float, offset_s: float = 0.0) -> None:
+        self.period_s = period_s
+        self.offset_s = offset_s
+        self._due_s: float | None = None
+
+    def due(self, now_s: float) -> bool:
+        """Whether the work runs in the step at ``now_s`` (if so, the next is scheduled)."""
+        if self._due_s is None:
+            self._due_s = now_s + self.offset_s
+        if not is_due(now_s, self._due_s):
+            return False
+        self._due_s = now_s + self.period_s
+        return True

@@ -16,7 +16,7 @@ from acslam.messages import (
     RobotSighting,
 )
 from acslam.pipeline.stages import AssociationResult, Localizer
-from acslam.schedule import is_due
+from acslam.schedule import Periodic
 
 
 @dataclass(frozen=True)
@@ -59,8 +59,11 @@ class Perception:
         self.localizer = localizer
         self.robot_ids = list(robot_ids)
         self.robot_reach_m = robot_reach_m
-        self.loop_search_period_s = loop_search_period_s
-        self._next_loop_search_s: float | None = None
+        # Loop searches from half a period after the first batch: the server's map update
+        # has the same period from the first cycle, and the two heaviest parts of a cycle
+        # (loop matching with iSAM2's extra iterations, and the costmap with frontiers)
+        # then fall in different cycles.
+        self._loop_searches = Periodic(loop_search_period_s, 0.5 * loop_search_period_s)
 
     def localize(self, messages: Iterable[RobotMessage], now_s: float) -> Localized:
         """Ingest, match the new scans, optimize (searching for loop closures when due);
@@ -83,20 +86,8 @@ class Perception:
         ]
         for scan in scans:
             self.localizer.match_scan(scan.index, scan.mappable, scan.blind_sectors)
-        self.localizer.optimize(close_loops=self._loop_search_due(now_s))
+        self.localizer.optimize(close_loops=self._loop_searches.due(now_s))
         return Localized(scans, landmarks)
-
-    def _loop_search_due(self, now_s: float) -> bool:
-        """Every ``loop_search_period_s`` from half a period after the first batch: the
-        server's map update has the same period from the first cycle, and the two
-        heaviest parts of a cycle (loop matching with iSAM2's extra iterations, and the
-        costmap with frontiers) then fall in different cycles."""
-        if self._next_loop_search_s is None:
-            self._next_loop_search_s = now_s + 0.5 * self.loop_search_period_s
-        if not is_due(now_s, self._next_loop_search_s):
-            return False
-        self._next_loop_search_s = now_s + self.loop_search_period_s
-        return True
 
     def _kept(self, index: int, scan: LidarScan, pose: np.ndarray) -> KeptScan:
         valid = scan.ranges > 0

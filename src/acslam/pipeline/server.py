@@ -58,7 +58,7 @@ from acslam.pipeline.snapshot import LocalizationView, MapView, Snapshot
 from acslam.planning.astar import lookahead_point, remaining_length_m
 from acslam.planning.field import DistanceField, RobotState
 from acslam.planning.recovery import Recovery, penalize
-from acslam.schedule import is_due
+from acslam.schedule import Periodic, is_due
 
 TEAM_FRAME = "map"
 MAP_LANE = "map"
@@ -156,7 +156,7 @@ class Server:
             self._localizer,
             range(self._robot_count),
             reach_m,
-            config.algorithms.server.map_update_period_s,
+            algorithms.server.map_update_period_s,
         )
         self._mapper = MAPPERS.create(algorithms.mapper, spec=map_spec)
         self._frontier_detector = FRONTIER_DETECTORS.create(
@@ -182,7 +182,7 @@ class Server:
         self._map_job: Future[_MapProducts] | None = None
         self._map_time_s = -math.inf
         self._decision_job: Future[_Decisions] | None = None
-        self._next_map_update_s = 0.0
+        self._map_updates = Periodic(algorithms.server.map_update_period_s)
         self._next_replan_s = 0.0
         self._replan_now = True
         self._finished = False
@@ -249,15 +249,13 @@ class Server:
             self._timings_s[stage] = time.perf_counter() - start
 
     def _step(self, messages: Iterable[RobotMessage], now_s: float) -> list[tuple[float, float]]:
-        map_update_due = is_due(now_s, self._next_map_update_s)
+        map_update_due = self._map_updates.due(now_s)
         with self._timed("slam"):
             scans = self._perception.localize(messages, now_s).scans
         self._integrate(scans)
         self._take_mapping()
-        if map_update_due:
-            self._next_map_update_s = now_s + self._config.algorithms.server.map_update_period_s
-            if self._map_job is None:
-                self._map_job = self._jobs.submit(MAP_LANE, self._map_update(now_s))
+        if map_update_due and self._map_job is None:
+            self._map_job = self._jobs.submit(MAP_LANE, self._map_update(now_s))
         self._take_map_products()
         poses = np.array([self._localizer.latest_pose(i) for i in range(self._robot_count)])
         if (self._replan_now or is_due(now_s, self._next_replan_s)) and self._decision_job is None:
