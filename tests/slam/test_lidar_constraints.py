@@ -15,11 +15,13 @@ from acslam.slam.lidar_constraints import MAX_LOOP_ATTEMPTS, LidarConstraints
 from acslam.worlds.world import World
 
 STEP_M = 0.1
+TURN_RAD = 0.35
 
 
-def _drive(baseline_m: float) -> list[tuple[int, int]]:
-    """Drive 3 m along a 6 m x 3 m box, a scan and an odometry step every 0.1 m; returns
-    the keyframe pairs of the verified sequential constraints."""
+def _drive(baseline_m: float, turn_steps: int = 0) -> list[tuple[int, int]]:
+    """Drive 3 m along a 6 m x 3 m box, a scan and an odometry step every 0.1 m, then
+    turn on the spot ``turn_steps`` steps of 0.35 rad (a keyframe each); returns the
+    keyframe pairs of the verified sequential constraints."""
     occupied = np.zeros((60, 120), dtype=bool)  # 6 m x 3 m at 5 cm, walls all round
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True
     world = World("box", GridSpec(0.0, 0.0, 0.05, 60, 120), occupied)
@@ -36,10 +38,14 @@ def _drive(baseline_m: float) -> list[tuple[int, int]]:
         add(index_a, index_b, *args)
 
     slam.scans.add_constraint = record
-    for k in range(31):
+    pose = np.array([1.0, 1.5, 0.0])
+    steps = [np.array([STEP_M, 0.0, 0.0])] * 30 + [np.array([0.0, 0.0, TURN_RAD])] * turn_steps
+    for k in range(len(steps) + 1):
         if k:
-            slam.add_odometry(OdometryIncrement(0, k * 0.5, (k - 1) * 0.5, STEP_M, 0.0, 0.0))
-        scan = sensor.scan(0, k * 0.5, (1.0 + k * STEP_M, 1.5, 0.0), np.zeros((0, 3)), -1)
+            dx, _, dtheta = steps[k - 1]
+            slam.add_odometry(OdometryIncrement(0, k * 0.5, (k - 1) * 0.5, dx, 0.0, dtheta))
+            pose = pose + np.array([dx * np.cos(pose[2]), dx * np.sin(pose[2]), dtheta])
+        scan = sensor.scan(0, k * 0.5, tuple(pose), np.zeros((0, 3)), -1)
         index = slam.add_scan(scan)
         if index is not None:
             lidar.add_scan(slam, index, scan)
@@ -56,6 +62,17 @@ def test_each_keyframe_is_also_matched_to_the_latest_one_a_baseline_back() -> No
     baseline = {(k - 4, k) for k in range(4, keyframes + 1)}
     assert set(pairs) == previous | baseline
     assert set(_drive(baseline_m=0.0)) == previous
+
+
+def test_a_keyframe_is_the_baseline_of_one_later_keyframe_only() -> None:
+    """Turning on the spot after the 3 m drive makes a keyframe per 0.35 rad step, all
+    with the same latest keyframe 1 m back: keyframe 6, the baseline of keyframe 10
+    already. None is matched to it again; each only to its previous keyframe."""
+    pairs = _drive(baseline_m=1.0, turn_steps=6)
+    assert max(b for _, b in pairs) == 16
+    previous = {(k - 1, k) for k in range(1, 17)}
+    baseline = {(k - 4, k) for k in range(4, 11)}
+    assert set(pairs) == previous | baseline
 
 
 def _exhaustive_order(lidar: LidarConstraints, slam: SlamBackend) -> list[tuple[int, int]]:
