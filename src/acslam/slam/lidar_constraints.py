@@ -159,11 +159,10 @@ class LidarConstraints:
         baseline_m = self.config.sequential_baseline_m
         if baseline_m <= 0.0:
             return None
+        used = self._last_baseline.get(robot_id, -1)
         older = keyframe - 2
-        while (entry := self._by_keyframe.get((robot_id, older))) is not None:
+        while older > used and (entry := self._by_keyframe.get((robot_id, older))) is not None:
             if path_m - self._entries[entry].path_m >= baseline_m:
-                if older <= self._last_baseline.get(robot_id, -1):
-                    return None
                 self._last_baseline[robot_id] = older
                 return self._entries[entry]
             older -= 1
