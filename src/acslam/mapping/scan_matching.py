@@ -211,6 +211,18 @@ def prepare_scan(
     )  # fmt: skip
 
 
+def merged_reference(
+    scans: list[tuple[np.ndarray, ScanPoints]], config: ScanMatchingConfig
+) -> PreparedScan:
+    """One reference (a submap) from several scans, each given with its sensor pose in
+    the reference's frame: their points merged, then prepared as one scan seen from the
+    frame's origin."""
+    points = np.vstack([transform_points(pose, scan.points_m) for pose, scan in scans])
+    return prepare_scan(
+        np.arctan2(points[:, 1], points[:, 0]), np.hypot(points[:, 0], points[:, 1]), config
+    )
+
+
 MIN_FIT_HADAMARD_RATIO = 1e-6
 """A fit whose (scaled) normal matrix is closer to singular than this (the neighbours
 bunched at one place along the line) falls back to their centroid's line."""

@@ -29,11 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between, transform_points
+from acslam.geometry import between
 from acslam.mapping.scan_matching import (
     PreparedScan,
     ScanMatchResult,
     match_scans,
+    merged_reference,
     prepare_scan,
     scan_points,
     verify,
@@ -240,20 +241,14 @@ class LidarConstraints:
         if self.submap_keyframes == 1:
             return base.scan
         base_pose = slam.scans.pose(base.scan_index)
-        clouds = []
+        scans = []
         for keyframe in range(last, max(last - self.submap_keyframes, -1), -1):
             entry = self._by_keyframe.get((robot_id, keyframe))
             if entry is None:
                 continue
             scan = self._entries[entry]
-            relative = between(base_pose, slam.scans.pose(scan.scan_index))
-            clouds.append(transform_points(relative, scan.scan.points_m))
-        points = np.vstack(clouds)
-        return prepare_scan(
-            np.arctan2(points[:, 1], points[:, 0]),
-            np.hypot(points[:, 0], points[:, 1]),
-            self.config,
-        )
+            scans.append((between(base_pose, slam.scans.pose(scan.scan_index)), scan.scan))
+        return merged_reference(scans, self.config)
 
     def _constrain(
         self,
