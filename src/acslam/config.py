@@ -529,8 +529,10 @@ class ScanMatchingConfig(Section):
     loop_radius_m: PositiveFloat = 2.0
     loop_min_separation_s: NonNegativeFloat = 20.0
     # Sequential matches go against the merged scans of this many previous keyframes of
-    # the robot (placed by their current estimates): more of the scene per match, so
-    # less drift per step. 1: the previous keyframe's scan alone.
+    # the robot (placed by their current estimates): more of the scene per match, which a
+    # 180-degree laser needs (the carmen preset). 1: the previous keyframe's scan alone.
+    # With the simulated LDS-02, five drift no less than one and their covariances are
+    # overconfident (benchmarks/scan_matching_accuracy.py).
     submap_keyframes: Annotated[int, Field(ge=1)] = 1
     # Every scan besides its keyframe's first is matched to that first scan and placed by
     # the match instead of by odometry, when verified: each scan's pose, the trajectory a
