@@ -80,12 +80,10 @@ def score(robots: list[list], config: ScanMatchingConfig, submap: int, seed: int
             truth = between(pose_a, pose_b)
             guess = truth + rng.normal(0.0, GUESS_SIGMAS)
             start = time.perf_counter()
+            # Newest first, as SLAM merges them: the voxel filter keeps a cell's first return.
+            submap_scans = reversed(keyframes[index - submap : index])
             reference = merged_reference(
-                [
-                    (between(pose_a, pose), points)
-                    for pose, points in keyframes[index - submap : index]
-                ],
-                config,
+                [(between(pose_a, pose), points) for pose, points in submap_scans], config
             )
             result = match_scans(reference, query, guess, config, guess_from_odometry=True)
             seconds += time.perf_counter() - start
