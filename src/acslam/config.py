@@ -524,6 +524,10 @@ class ScanMatchingConfig(Section):
     # Besides the previous keyframe, each keyframe is matched to the latest one at least
     # this far back along the robot's path (0: not at all), see lidar_constraints.
     sequential_baseline_m: NonNegativeFloat = 1.0
+    # A baseline match must agree with the previous-keyframe matches it spans, composed:
+    # the squared Mahalanobis distance under both covariances summed is at most this
+    # (chi-square, 3 dof, 99.9 %; 0: not checked; nor when a link of the chain is missing).
+    baseline_chain_gate_chi2: NonNegativeFloat = 16.27
     # Loop-closure candidates: keyframes closer than this, and (same robot) further apart
     # in time than loop_min_separation_s so neighbours in the chain are not re-matched.
     loop_radius_m: PositiveFloat = 2.0

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+import pytest
 
 from acslam.benchmarks.loop_closure import ExhaustiveSearch
 from acslam.config import LidarConfig, ScanMatchingConfig, SlamConfig
 from acslam.geometry import between
 from acslam.grid import GridSpec
+from acslam.mapping.scan_matching import match_scans
 from acslam.messages import OdometryIncrement
 from acslam.sim.lidar import LidarSensor
+from acslam.slam import lidar_constraints
 from acslam.slam.backend import SlamBackend
 from acslam.slam.lidar_constraints import MAX_LOOP_ATTEMPTS, LidarConstraints
 from acslam.worlds.world import World
@@ -18,7 +23,9 @@ STEP_M = 0.1
 TURN_RAD = 0.35
 
 
-def _drive(baseline_m: float, turn_steps: int = 0) -> list[tuple[int, int]]:
+def _drive(
+    baseline_m: float, turn_steps: int = 0, chain_gate_chi2: float = 16.27
+) -> list[tuple[int, int]]:
     """Drive 3 m along a 6 m x 3 m box, a scan and an odometry step every 0.1 m, then
     turn on the spot ``turn_steps`` steps of 0.35 rad (a keyframe each); returns the
     keyframe pairs of the verified sequential constraints."""
@@ -29,7 +36,11 @@ def _drive(baseline_m: float, turn_steps: int = 0) -> list[tuple[int, int]]:
     # Exact odometry, three steps to a keyframe: no calibration to rescale them.
     config = SlamConfig(keyframe_distance_m=0.3, odometry_calibration=False)
     slam = SlamBackend(config, {0: np.array([1.0, 1.5, 0.0])})
-    lidar = LidarConstraints(ScanMatchingConfig(sequential_baseline_m=baseline_m))
+    lidar = LidarConstraints(
+        ScanMatchingConfig(
+            sequential_baseline_m=baseline_m, baseline_chain_gate_chi2=chain_gate_chi2
+        )
+    )
     pairs = []
     add = slam.scans.add_constraint
 
@@ -73,6 +84,27 @@ def test_a_keyframe_is_the_baseline_of_one_later_keyframe_only() -> None:
     previous = {(k - 1, k) for k in range(1, 17)}
     baseline = {(k - 4, k) for k in range(4, 11)}
     assert set(pairs) == previous | baseline
+
+
+def test_a_baseline_match_that_slid_from_the_chain_of_matches_it_spans_is_dropped(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Every baseline match (the only ones spanning over 0.8 m here) slides 10 cm along
+    the way with its covariance unchanged, as a match that settles in a wrong fit does:
+    the odometry over its four keyframes (1.5 cm per keyframe) lets that pass, the chain
+    of previous-keyframe matches (a few mm each) does not."""
+
+    def sliding(reference, query, guess, config, guess_from_odometry=False):
+        result = match_scans(reference, query, guess, config, guess_from_odometry)
+        if guess[0] > 0.8:
+            result = replace(result, relative=result.relative + np.array([0.1, 0.0, 0.0]))
+        return result
+
+    monkeypatch.setattr(lidar_constraints, "match_scans", sliding)
+    previous = {(k - 1, k) for k in range(1, 11)}
+    baseline = {(k - 4, k) for k in range(4, 11)}
+    assert set(_drive(baseline_m=1.0)) == previous
+    assert set(_drive(baseline_m=1.0, chain_gate_chi2=0.0)) == previous | baseline
 
 
 def _exhaustive_order(lidar: LidarConstraints, slam: SlamBackend) -> list[tuple[int, int]]:
