@@ -13,6 +13,9 @@ a chain of them leaves), and time per match. Rejected matches are counted, not s
 
 Run: ``acslam run --scenario examples/floorplan-office-a.yaml --max-time 200 --out RUN``,
 then ``python benchmarks/scan_matching_accuracy.py RUN [RUN ...] [--submaps 1 2 5]``.
+``--algorithms carmen`` (a preset or an algorithms YAML, as a replay takes) scores that
+one's scan matching and keyframe spacing instead of the run's own, e.g. on the SICK-like
+run of ``examples/sick-laser-lab-ipa.yaml``.
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from acslam.config import ScanMatchingConfig
+from acslam.config import AlgorithmsConfig, ScanMatchingConfig
 from acslam.geometry import between, wrap_angle
 from acslam.mapping.scan_matching import match_scans, merged_reference, scan_points, verify
+from acslam.replay import algorithms_config
 from acslam.scenario import load_scenario
 from acslam.sim.lidar import LidarSensor
 from acslam.trajectory import read_tum
@@ -46,11 +50,16 @@ def keyframe_rows(poses: np.ndarray, distance_m: float, angle_rad: float) -> lis
     return rows
 
 
-def keyframe_scans(run: Path, seed: int) -> tuple[list[list], ScanMatchingConfig]:
-    """Per robot of a run, ``(true pose, scan points)`` at each keyframe."""
+def keyframe_scans(
+    run: Path, seed: int, algorithms: AlgorithmsConfig | None
+) -> tuple[list[list], ScanMatchingConfig]:
+    """Per robot of a run, ``(true pose, scan points)`` at each keyframe, and the scan
+    matching config (``algorithms``' if given, else the run's)."""
     scenario = load_scenario(run / "config.yaml")
     config = scenario.config
-    localizer = config.algorithms.localizer
+    algorithms = config.algorithms if algorithms is None else algorithms
+    localizer = algorithms.localizer
+    matching = algorithms.scan_matching
     sensor = LidarSensor(config.sensors.lidar, scenario.world, np.random.default_rng(seed))
     robots = []
     for robot_id in range(scenario.robot_count):
@@ -62,11 +71,9 @@ def keyframe_scans(run: Path, seed: int) -> tuple[list[list], ScanMatchingConfig
             scan = sensor.scan(
                 robot_id, float(stamps[row]), tuple(poses[row]), np.zeros((0, 3)), -1
             )
-            keyframes.append(
-                (poses[row], scan_points(scan.angles, scan.ranges, config.algorithms.scan_matching))
-            )
+            keyframes.append((poses[row], scan_points(scan.angles, scan.ranges, matching)))
         robots.append(keyframes)
-    return robots, config.algorithms.scan_matching
+    return robots, matching
 
 
 def score(robots: list[list], config: ScanMatchingConfig, submap: int, seed: int) -> dict:
@@ -118,10 +125,12 @@ def main() -> None:
     parser.add_argument("runs", type=Path, nargs="+", help="folders of finished acslam runs")
     parser.add_argument("--submaps", type=int, nargs="+", default=[1, 2, 5])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--algorithms", help="a preset's name or an algorithms YAML")
     args = parser.parse_args()
+    algorithms = None if args.algorithms is None else algorithms_config(args.algorithms)
     robots, config = [], None
     for run in args.runs:
-        run_robots, config = keyframe_scans(run, args.seed)
+        run_robots, config = keyframe_scans(run, args.seed, algorithms)
         robots += run_robots
     print(
         f"{sum(len(k) for k in robots)} keyframes of {len(robots)} robots in {len(args.runs)} runs"
