@@ -524,17 +524,18 @@ class ScanMatchingConfig(Section):
     # Besides the previous keyframe, each keyframe is matched to the latest one at least
     # this far back along the robot's path (0: not at all), see lidar_constraints.
     sequential_baseline_m: NonNegativeFloat = 1.0
-    # A baseline match must agree with the previous-keyframe matches it spans, composed:
-    # the squared Mahalanobis distance under both covariances summed is at most this
-    # (chi-square, 3 dof, 99.9 %; 0: not checked; nor when a link of the chain is missing).
+    # A baseline match must agree with the previous-keyframe matches it spans, composed (a
+    # rejected one enters as the estimate's step with its odometry's covariance): the
+    # squared Mahalanobis distance under both covariances summed is at most this
+    # (chi-square, 3 dof, 99.9 %; 0: not checked).
     baseline_chain_gate_chi2: NonNegativeFloat = 16.27
     # Loop-closure candidates: keyframes closer than this, and (same robot) further apart
     # in time than loop_min_separation_s so neighbours in the chain are not re-matched.
     loop_radius_m: PositiveFloat = 2.0
     loop_min_separation_s: NonNegativeFloat = 20.0
     # Sequential matches go against the merged scans of this many previous keyframes of
-    # the robot (placed by their current estimates): more of the scene per match, which a
-    # 180-degree laser needs (the carmen preset). 1: the previous keyframe's scan alone.
+    # the robot (placed by their current estimates): more of the scene per match, as the
+    # carmen preset uses for its 180-degree laser. 1: the previous keyframe's scan alone.
     # With the simulated LDS-02, five drift no less than one and their covariances are
     # overconfident (benchmarks/scan_matching_accuracy.py).
     submap_keyframes: Annotated[int, Field(ge=1)] = 1
