@@ -743,6 +743,17 @@ def with_restart_spread(
     return replace(result, covariance=covariance)
 
 
+def disagreement_sq(
+    result: ScanMatchResult, expected: np.ndarray, expected_covariance: np.ndarray
+) -> float:
+    """Squared Mahalanobis distance between a match and another estimate of the same
+    relative pose, under both covariances summed."""
+    offset = np.asarray(result.relative, dtype=float) - np.asarray(expected, dtype=float)
+    offset[2] = wrap_angle(float(offset[2]))
+    combined = np.asarray(expected_covariance, dtype=float) + result.covariance
+    return float(offset @ np.linalg.solve(combined, offset))
+
+
 def verify(
     result: ScanMatchResult,
     initial_guess: np.ndarray,
@@ -779,10 +790,7 @@ def verify(
     if abs(correction[2]) > config.max_correction_rad:
         reasons.append(f"rotation correction > {config.max_correction_rad} rad")
     if guess_covariance is not None and config.odometry_gate_chi2 > 0.0:
-        offset = np.asarray(result.relative, dtype=float) - np.asarray(initial_guess, dtype=float)
-        offset[2] = wrap_angle(float(offset[2]))
-        combined = np.asarray(guess_covariance, dtype=float) + result.covariance
-        distance_sq = float(offset @ np.linalg.solve(combined, offset))
+        distance_sq = disagreement_sq(result, initial_guess, guess_covariance)
         if not distance_sq <= config.odometry_gate_chi2:
             reasons.append(
                 f"disagrees with odometry (Mahalanobis^2 {distance_sq:.1f} > "

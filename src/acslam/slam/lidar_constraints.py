@@ -34,10 +34,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between, compose, wrap_angle
+from acslam.geometry import between, compose
 from acslam.mapping.scan_matching import (
     PreparedScan,
     ScanMatchResult,
+    disagreement_sq,
     match_scans,
     merged_reference,
     prepare_scan,
@@ -92,9 +93,9 @@ class LidarConstraints:
         )
         self._scan_indices = np.zeros(64, dtype=np.intp)  # per entry, with spare rows
         self._last_baseline: dict[int, int] = {}  # robot -> keyframe last used as a baseline
-        # (robot, keyframe) -> its accepted match to the previous keyframe, kept back to the
-        # last baseline: the chain a baseline match is checked against.
-        self._steps: dict[tuple[int, int], ScanMatchResult] = {}
+        # robot -> keyframe -> its accepted match to the previous keyframe, kept back to
+        # the last baseline: the chain a baseline match is checked against.
+        self._steps: dict[int, dict[int, ScanMatchResult]] = {}
         self._checks_chain = (
             config.baseline_chain_gate_chi2 > 0 and config.sequential_baseline_m > 0
         )
@@ -140,7 +141,7 @@ class LidarConstraints:
         self._count(result)
         if result is not None:
             if self._checks_chain:
-                self._steps[(robot_id, keyframe)] = result
+                self._steps.setdefault(robot_id, {})[keyframe] = result
             # The span of one keyframe's odometry: what calibrates it.
             slam.calibrate_odometry(
                 robot_id, self._entries[previous].stamp_s, scan.stamp, result.relative,
@@ -151,8 +152,9 @@ class LidarConstraints:
             since = slam.scans.keyframe(baseline.scan_index)[1]
             chain = self._chain(slam, robot_id, since, keyframe)
             self._count(self._constrain(slam, baseline, self._entries[-1], chain=chain))
-            for older in [k for r, k in self._steps if r == robot_id and k <= since]:
-                del self._steps[(robot_id, older)]
+            steps = self._steps.get(robot_id, {})
+            for older in [k for k in steps if k <= since]:
+                del steps[older]
 
     def _count(self, result: ScanMatchResult | None) -> None:
         if result is None:
@@ -168,9 +170,10 @@ class LidarConstraints:
         estimate's step with its odometry's covariance. None if the check is off."""
         if not self._checks_chain:
             return None
+        steps = self._steps.get(robot_id, {})
         relative, covariance = np.zeros(3), np.zeros((3, 3))
         for keyframe in range(since + 1, now + 1):
-            step = self._steps.get((robot_id, keyframe))
+            step = steps.get(keyframe)
             if step is not None:
                 link, link_covariance = step.relative, step.covariance
             else:
@@ -321,12 +324,10 @@ class LidarConstraints:
             result, guess, self.config, strict=False, guess_covariance=odometry_covariance
         ):
             return None
-        if chain is not None:
-            offset = result.relative - chain[0]
-            offset[2] = wrap_angle(float(offset[2]))
-            distance_sq = float(offset @ np.linalg.solve(chain[1] + result.covariance, offset))
-            if not distance_sq <= self.config.baseline_chain_gate_chi2:
-                return None
+        if chain is not None and not (
+            disagreement_sq(result, *chain) <= self.config.baseline_chain_gate_chi2
+        ):
+            return None
         slam.scans.add_constraint(
             a.scan_index, b.scan_index, result.relative, result.covariance, False
         )
