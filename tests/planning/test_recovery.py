@@ -66,6 +66,25 @@ def test_penalty_raises_cost_near_traps_only_and_keeps_lethal() -> None:
     assert recovery.traps_xy_m == [] and recovery.count == 0
 
 
+def test_penalty_near_the_grid_edge_equals_measuring_every_cell() -> None:
+    """Traps by an edge, off the grid and overlapping: each cell of the grid measured
+    against each trap (the brute-force reference) gives the same costs, to the bit."""
+    grid = GridSpec(-1.0, 2.0, 0.05, 47, 61)
+    rng = np.random.default_rng(3)
+    cost = rng.uniform(0.0, 5.0, grid.shape)
+    cost[rng.uniform(size=grid.shape) < 0.1] = np.inf
+    before = cost.copy()
+    traps = [np.array(t) for t in ([-0.95, 2.1], [0.1, 3.0], [0.2, 3.1], [-1.3, 1.8], [5.0, 9.0])]
+    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, dtype=bool))).reshape(47, 61, 2)
+    expected = cost.copy()
+    for trap in traps:
+        near = np.linalg.norm(centres - trap, axis=-1) <= PLANNING.recovery_penalty_radius_m
+        expected[near] += PLANNING.recovery_penalty_cost
+    np.testing.assert_array_equal(penalize(cost, grid, traps, PLANNING), expected)
+    np.testing.assert_array_equal(cost, before)
+    assert (expected != cost).sum() > 100
+
+
 def test_a_new_goal_forgets_traps_and_the_same_goal_keeps_them() -> None:
     recovery = Recovery(PlanningConfig())
     timeout = PlanningConfig().stuck_timeout_s

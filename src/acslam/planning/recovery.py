@@ -22,6 +22,7 @@ the simulator: the server drives it from estimated poses.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -109,20 +110,27 @@ class Recovery:
 def penalize(
     cost: np.ndarray, grid: GridSpec, traps_xy_m: Sequence[np.ndarray], planning: PlanningConfig
 ) -> np.ndarray:
-    """A copy of the costmap cost with ``recovery_penalty_cost`` added near each of a
-    robot's traps (:attr:`Recovery.traps_xy_m`, or a copy taken when a replan was
-    scheduled).
+    """The costmap cost with ``recovery_penalty_cost`` added near each of a robot's traps
+    (:attr:`Recovery.traps_xy_m`, or a copy taken when a replan was scheduled): a copy if
+    there are traps, ``cost`` itself if not.
 
     Lethal cells stay lethal and nothing becomes lethal, so a path still exists
-    through a trap when it is the only way.
+    through a trap when it is the only way. Only the cells of a trap's bounding box are
+    measured: a building's window has millions of cells, a trap's disc a few hundred.
     """
-    penalised = np.array(cost, dtype=float)
     if not traps_xy_m:
-        return penalised
-    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, dtype=bool)))
-    centres = centres.reshape(*grid.shape, 2)
+        return cost
+    penalised = np.array(cost, dtype=float)
     radius_m = planning.recovery_penalty_radius_m
+    reach_cells = math.ceil(radius_m / grid.resolution_m) + 1
     for trap in traps_xy_m:
+        row, col = grid.world_to_cell(trap)[0]
+        r0, r1 = max(row - reach_cells, 0), min(row + reach_cells + 1, grid.rows)
+        c0, c1 = max(col - reach_cells, 0), min(col + reach_cells + 1, grid.cols)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        rows, cols = np.mgrid[r0:r1, c0:c1]
+        centres = grid.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
         near = np.linalg.norm(centres - trap, axis=-1) <= radius_m
-        penalised[near] += planning.recovery_penalty_cost
+        penalised[r0:r1, c0:c1][near.reshape(r1 - r0, c1 - c0)] += planning.recovery_penalty_cost
     return penalised
