@@ -172,12 +172,17 @@ def test_a_slow_allocation_does_not_hold_back_the_control_loop(gated: Scenario) 
     loop = Loop(gated, BackgroundJobs())
     try:
         start_allocating(loop)
-        # While the allocation waits at the gate, the cycles go on: the map and the
-        # costmap follow the robots' scans, and nobody has a goal yet.
-        waiting = [loop.step() for _ in range(20)]
+        # While the allocation waits at the gate, the cycles go on and the map lane
+        # delivers new costmaps (a map update is due every half second, and at least 2 s
+        # are stepped), and nobody has a goal yet. Whether the map itself changes depends
+        # on when the mapper's jobs end on the wall clock: the robots stand still.
+        waiting = [loop.step()]
+        deadline = time.monotonic() + WAIT_S
+        while len(waiting) < 20 or waiting[-1].costmap is waiting[0].costmap:
+            assert time.monotonic() < deadline
+            waiting.append(loop.step())
+        assert waiting[0].costmap is not None
         assert all(goal is None for s in waiting for goal in s.goals_m)
-        assert waiting[-1].map.version > waiting[0].map.version
-        assert waiting[-1].costmap is not None
         assert all("allocation" not in s.timings_s for s in waiting)
         GatedAllocator.gate.set()
         deadline = time.monotonic() + WAIT_S
