@@ -324,6 +324,11 @@ class SlamConfig(StageParams):
     # odometry chain since added; so does the robot's own pose marginal (0: fresh
     # marginals in every frame).
     association_covariance_reuse_keyframes: Annotated[int, Field(ge=0)] = 5
+    # A landmark that got a factor within this many iSAM2 updates enters that joint
+    # marginal; an older one sits deep in the Bayes tree, where a marginal costs more the
+    # longer the trajectory, and is scored with the last marginal computed for it (a
+    # marginal only shrinks as the graph learns) and no pose-landmark cross term.
+    association_joint_marginal_max_age_updates: Annotated[int, Field(ge=0)] = 10
     # A point and a landmark that both carry binary descriptors (ORB: 256 bits) are
     # candidates only within this Hamming distance; ORB-SLAM matches within 50-100 bits.
     association_max_descriptor_bits: Annotated[int, Field(ge=0)] = 64

@@ -100,6 +100,9 @@ class SlamBackend:
         self._robots: dict[int, _Robot] = {}
         self._landmark_positions = np.zeros((0, 3))
         self._pending_landmark_covs: dict[int, np.ndarray] = {}
+        # Each landmark's latest known covariance: its first one, then every marginal
+        # iSAM2 gave for it (see last_landmark_covariance).
+        self._last_landmark_covs: dict[int, np.ndarray] = {}
         self._marginals: dict[int, np.ndarray] = {}
         self._odometry_variances: dict[int, np.ndarray] = {}
         self._moved: list[tuple[int, int]] = []
@@ -248,6 +251,7 @@ class SlamBackend:
         self._initial.insert(keys.landmark_key(index), gtsam.Point3(*position))
         self._landmark_positions = np.vstack([self._landmark_positions, position])
         self._pending_landmark_covs[index] = covariance
+        self._last_landmark_covs[index] = covariance
         return index
 
     # ------------------------------------------------------------------ optimisation
@@ -373,6 +377,7 @@ class SlamBackend:
             if joint is not None and i in optimised:
                 lm_covs.append(np.asarray(joint.at(lkey, lkey)))
                 cross.append(np.asarray(joint.at(ref_key, lkey)))
+                self._last_landmark_covs[i] = lm_covs[-1]
             else:
                 lm_covs.append(self._landmark_covariance(i))
                 cross.append(None)
@@ -442,13 +447,28 @@ class SlamBackend:
 
     def _landmark_covariance(self, index: int) -> np.ndarray:
         pending = self._pending_landmark_covs.get(index)
-        return pending if pending is not None else self._marginal(keys.landmark_key(index))
+        if pending is not None:
+            return pending
+        covariance = self._marginal(keys.landmark_key(index))
+        self._last_landmark_covs[index] = covariance
+        return covariance
+
+    def last_landmark_covariance(self, index: int) -> np.ndarray:
+        """The landmark's latest known covariance, at no cost: the last marginal iSAM2 gave
+        for it, else its first covariance. Factors only add information, so it is at least
+        as wide as the current marginal (up to relinearisation)."""
+        return self._last_landmark_covs[index]
 
     # ------------------------------------------------------------------ queries
 
     @property
     def robot_ids(self) -> list[int]:
         return sorted(self._robots)
+
+    @property
+    def update_count(self) -> int:
+        """iSAM2 updates so far."""
+        return len(self.update_durations_s)
 
     def keyframe_count(self, robot_id: int) -> int:
         return len(self._robots[robot_id].pose_keys)

@@ -163,6 +163,7 @@ class LandmarkAssociation:
         self._descriptors: dict[int, np.ndarray] = {}  # landmark -> its first descriptor
         self._tentatives: list[_Tentative] = []
         self._relative: dict[tuple[int, int], _Relative] = {}  # by (robot, landmark)
+        self._last_factor_update: dict[int, int] = {}  # landmark -> backend.update_count
         self.robot_observations = 0
         self.dropped_ambiguous = 0
         self.tentative_observations = 0
@@ -216,6 +217,7 @@ class LandmarkAssociation:
         noise = observation_noise(cov_kf, probability, self.config.huber_k)
         factor = observation_factor(pose_key, keys.landmark_key(index), point_kf, noise)
         self.backend.add_factor(factor)
+        self._last_factor_update[index] = self.backend.update_count
 
     def _new_landmark(self, frame: _Frame, n: int) -> int:
         index = self.backend.new_landmark(frame.world[n], frame.cov[n])
@@ -246,8 +248,10 @@ class LandmarkAssociation:
         this robot's live tentative landmarks. Innovation covariances use the pose-landmark
         cross-covariance from an iSAM2 joint marginal for confirmed landmarks (or, within
         ``association_covariance_reuse_keyframes`` of this robot's last one, the landmark's
-        covariance relative to that keyframe plus the odometry chain since), and for a
-        tentative one the odometry chain between the keyframe it was last seen from and now.
+        covariance relative to that keyframe plus the odometry chain since; or, for a
+        landmark without a factor in ``association_joint_marginal_max_age_updates``
+        updates, its last known marginal beside the pose's, without the cross term), and for
+        a tentative one the odometry chain between the keyframe it was last seen from and now.
         """
         self._expire_tentatives(robot.robot_id, stamp)
         scores = self._score_frame(robot, frame)
@@ -292,7 +296,14 @@ class LandmarkAssociation:
         ref_rot = ref_pose.rotation().matrix()
         now_index = len(robot.pose_keys) - 1
         reused = self._reusable(robot.robot_id, confirmed, now_index)
-        queried = [i for i in confirmed if i not in reused]
+        max_age_updates = self.config.association_joint_marginal_max_age_updates
+        stale = {
+            i
+            for i in confirmed
+            if i not in reused
+            and backend.update_count - self._last_factor_update[i] > max_age_updates
+        }
+        queried = [i for i in confirmed if i not in reused and i not in stale]
         pose_block, lm_covs, cross = backend.landmark_blocks(ref_key, queried)
         if pose_block is not None:
             self._remember(robot.robot_id, ref_key, ref_pose, pose_block, queried, lm_covs, cross)
@@ -312,6 +323,9 @@ class LandmarkAssociation:
                     since, relative = reused[i]
                     chain = chain_variance(robot, since, now_index, rho2)
                     s = relative + np.diag([chain, chain, 0.0]) + frame.sensor[n]
+                elif i in stale:
+                    last = backend.last_landmark_covariance(i)
+                    s = innovation_covariance(lever, ref_cov, last, None, frame.sensor[n])
                 else:
                     q = query_of[i]
                     s = innovation_covariance(lever, ref_cov, lm_covs[q], cross[q], frame.sensor[n])
