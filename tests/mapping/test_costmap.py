@@ -57,6 +57,17 @@ def test_costmap_matches_max_over_obstacles(seed: int) -> None:
     assert (costmap.cost[known & (expected_distance > CONFIG.radius_m)] == 0.0).all()
 
 
+def test_distances_are_exact_roots_of_integer_squared_distances() -> None:
+    """Bit for bit: whatever block or thread computes a cell, it gets the same value."""
+    values = _random_values(4)
+    costmap = compute_costmap(values, SPEC, CONFIG, ROBOT_RADIUS_M)
+    cells = np.argwhere(np.ones(SPEC.shape, dtype=bool))
+    obstacles = np.argwhere(values == 100)
+    squared = ((cells[:, None, :] - obstacles[None, :, :]) ** 2).sum(axis=2).min(axis=1)
+    expected = np.sqrt(squared.astype(float)) * SPEC.resolution_m
+    np.testing.assert_array_equal(costmap.distance_m, expected.reshape(SPEC.shape))
+
+
 def test_empty_map_has_no_obstacle_costs() -> None:
     values = np.full(SPEC.shape, -1, dtype=np.int8)
     values[:, :10] = 0
