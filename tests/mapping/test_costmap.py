@@ -1,4 +1,5 @@
-"""Costmap (eqs. 4.35-4.36) against a brute-force loop over every obstacle cell."""
+"""Costmap (eqs. 4.35-4.36) against a brute-force loop over every obstacle cell, and its
+updates near changes against computing it afresh."""
 
 from __future__ import annotations
 
@@ -6,8 +7,8 @@ import numpy as np
 import pytest
 
 from acslam.config import CostmapConfig
-from acslam.grid import GridSpec
-from acslam.mapping.costmap import LETHAL_COST, compute_costmap
+from acslam.grid import GridSpec, Window
+from acslam.mapping.costmap import LETHAL_COST, CostmapUpdater, compute_costmap
 
 SPEC = GridSpec(1.0, -2.0, 0.1, 30, 40)
 CONFIG = CostmapConfig(cost_max=2.0, decay_lambda_per_m=3.0, radius_m=0.65, unknown_cost=0.3)
@@ -79,3 +80,55 @@ def test_empty_map_has_no_obstacle_costs() -> None:
 def test_shape_mismatch_is_rejected() -> None:
     with pytest.raises(ValueError, match="shape"):
         compute_costmap(np.zeros((3, 3), dtype=np.int8), SPEC, CONFIG, ROBOT_RADIUS_M)
+
+
+def test_a_reach_caps_the_distances_and_nothing_else() -> None:
+    values = _random_values(3)
+    exact = compute_costmap(values, SPEC, CONFIG, ROBOT_RADIUS_M)
+    capped = compute_costmap(values, SPEC, CONFIG, ROBOT_RADIUS_M, reach_m=0.8)
+    np.testing.assert_array_equal(capped.distance_m, np.minimum(exact.distance_m, 0.8))
+    np.testing.assert_array_equal(capped.cost, exact.cost)
+    np.testing.assert_array_equal(capped.lethal, exact.lethal)
+
+
+def _sub_window(spec: GridSpec, row0: int, col0: int, rows: int, cols: int) -> Window:
+    origin_x_m = spec.origin_x_m + col0 * spec.resolution_m
+    origin_y_m = spec.origin_y_m + row0 * spec.resolution_m
+    return Window(row0, col0, GridSpec(origin_x_m, origin_y_m, spec.resolution_m, rows, cols))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_updates_near_changes_equal_computing_afresh(seed: int) -> None:
+    """A growing window over a 600 x 600 map that changes in patches: obstacles appear
+    and vanish, cells become known; every update equals :func:`compute_costmap` on the
+    window with the same reach, to the bit. A shrinking window starts afresh."""
+    rng = np.random.default_rng(seed)
+    spec = GridSpec(0.0, 0.0, 0.05, 600, 600)
+    values = np.full(spec.shape, -1, dtype=np.int8)
+    values[200:400, 200:400] = 0
+    values[rng.random(spec.shape) < 0.001] = 100  # sparse: distances up to the reach
+    updater = CostmapUpdater(CONFIG, ROBOT_RADIUS_M, reach_m=1.0)
+    bounds = np.array([180, 180, 240, 260])  # row0, col0, rows, cols
+    for step in range(25):
+        for _ in range(int(rng.integers(1, 4))):
+            r, c = rng.integers(150, 450, size=2)
+            patch = values[r : r + rng.integers(2, 20), c : c + rng.integers(2, 20)]
+            patch[...] = rng.choice(
+                np.array([-1, 0, 100], dtype=np.int8), p=[0.3, 0.69, 0.01], size=patch.shape
+            )
+        if step == 20:
+            bounds = np.array([250, 250, 100, 100])
+        else:
+            grow = rng.integers(0, 12, size=4)
+            bounds = np.array([bounds[0] - grow[0], bounds[1] - grow[1], 0, 0]) + np.array(
+                [0, 0, bounds[2] + grow[0] + grow[2], bounds[3] + grow[1] + grow[3]]
+            )
+            bounds = np.clip(bounds, 0, 600)
+            bounds[2:] = np.minimum(bounds[2:], 600 - bounds[:2])
+        window = _sub_window(spec, *(int(b) for b in bounds))
+        crop = window.crop(values)
+        costmap = updater.update(crop, window)
+        expected = compute_costmap(crop, window.spec, CONFIG, ROBOT_RADIUS_M, reach_m=1.0)
+        np.testing.assert_array_equal(costmap.distance_m, expected.distance_m)
+        np.testing.assert_array_equal(costmap.cost, expected.cost)
+        np.testing.assert_array_equal(costmap.lethal, expected.lethal)

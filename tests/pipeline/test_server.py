@@ -1,20 +1,23 @@
-"""The server hands each stage what the protocol promises: checked with a mapper plugin
-that records its calls."""
+"""The server hands each stage what the protocol promises: checked with plugins that
+record their calls, and a costmap whose capped distances change no local plan."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from typing import ClassVar, Literal
 
 import numpy as np
 import pytest
 
-from acslam.config import MappingConfig, SlamConfig, parse_scenario
+from acslam.config import MappingConfig, ScenarioConfig, SlamConfig, parse_scenario
 from acslam.grid import GridSpec
+from acslam.mapping.costmap import compute_costmap
 from acslam.mapping.occupancy import TeamMap
 from acslam.messages import LidarScan
-from acslam.pipeline.registry import LOCALIZERS, MAPPERS
-from acslam.pipeline.server import Server
+from acslam.pipeline.registry import LOCAL_PLANNERS, LOCALIZERS, MAPPERS
+from acslam.pipeline.server import Server, costmap_reach_m
+from acslam.planning.field import DistanceField, RobotState
 from acslam.slam.localizer import Isam2Localizer
 
 
@@ -103,3 +106,51 @@ def test_map_updates_and_loop_searches_keep_their_period_in_different_cycles(
     cycles = np.arange(3000)
     assert np.array_equal(np.flatnonzero(map_updates), cycles[cycles % 5 == 0])
     assert np.array_equal(np.flatnonzero(localizer.loop_searches), cycles[cycles % 5 == 3])
+
+
+def _team_commands(
+    field: DistanceField, free: np.ndarray, planner_name: str, config: ScenarioConfig
+) -> list:
+    """Commands of the local planner for 3 robots at seeded random states on ``free``
+    cells, with goals on others."""
+    rng = np.random.default_rng(0)
+    params = LOCAL_PLANNERS.get(planner_name).params()
+    planner = LOCAL_PLANNERS.create(
+        params, planning=config.algorithms.planning, robots=config.robots
+    )
+    commands = []
+    for _ in range(15):
+        cells = free[rng.choice(len(free), 6, replace=False)]
+        xy = field.grid.cell_to_world(cells)
+        states = [RobotState(*xy[k], rng.uniform(-np.pi, np.pi), 0.1, 0.0) for k in range(3)]
+        planner.reset(0), planner.reset(1), planner.reset(2)
+        commands.append(planner.plan(states, list(xy[3:]), field))
+    return commands
+
+
+@pytest.mark.parametrize("planner_name", ["fgp", "dwa"])
+def test_the_costmap_reach_changes_no_local_plan(planner_name: str) -> None:
+    """The server's costmap caps distances at ``costmap_reach_m``: the local planners'
+    commands on that field equal those on the uncapped one, in a cluttered room. A reach
+    below the obstacle influence changes them (the check can fail)."""
+    config = parse_scenario({"world": {"generator": "dungeon"}}, "x.yaml")
+    rng = np.random.default_rng(5)
+    spec = GridSpec(0.0, 0.0, 0.05, 160, 200)
+    values = np.zeros(spec.shape, dtype=np.int8)
+    values[[0, -1], :] = values[:, [0, -1]] = 100
+    values[rng.random(spec.shape) < 0.002] = 100
+
+    def field(reach_m: float) -> DistanceField:
+        costmap = compute_costmap(
+            values, spec, config.algorithms.costmap, config.robots.radius_m, reach_m
+        )
+        clearance_m = np.maximum(costmap.distance_m - spec.resolution_m / math.sqrt(2.0), 0.0)
+        return DistanceField(clearance_m, spec)
+
+    exact = field(math.inf)
+    free = np.argwhere(exact.distance_m > 0.3)
+    uncapped = _team_commands(exact, free, planner_name, config)
+    capped = _team_commands(field(costmap_reach_m(config, spec)), free, planner_name, config)
+    assert capped == uncapped
+    too_short_m = config.algorithms.planning.obstacle_influence_m / 2
+    assert _team_commands(field(too_short_m), free, planner_name, config) != uncapped

@@ -19,6 +19,7 @@ from acslam.config import (
     RobotsConfig,
     ScanMatchingConfig,
     ThesisWorld,
+    parse_scenario,
 )
 from acslam.exploration.allocation import cluster_distances_m
 from acslam.exploration.clustering import FrontierCluster, cluster_frontiers
@@ -29,14 +30,15 @@ from acslam.exploration.frontiers import (
 )
 from acslam.exploration.params import DbscanParams, FactorGraphParams
 from acslam.geometry import compose
-from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, bresenham
-from acslam.mapping.costmap import compute_costmap
+from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window, bresenham
+from acslam.mapping.costmap import CostmapUpdater, compute_costmap
 from acslam.mapping.occupancy import LogOddsGrid, TeamMap, grid_spec_for_bounds
 from acslam.mapping.params import SubmapMappingConfig
 from acslam.mapping.scan_matching import match_scans, prepare_scan
 from acslam.mapping.submaps import SubmapTeamMap
 from acslam.messages import LidarScan
 from acslam.pipeline.registry import ALLOCATORS
+from acslam.pipeline.server import costmap_reach_m
 from acslam.planning.astar import astar_cells, snap_to_free
 from acslam.planning.travel_graph import TravelGraphBuilder
 from acslam.sim.lidar import LidarSensor
@@ -127,6 +129,7 @@ def bench_mapping(quick: bool) -> list[Figure]:
         5 if quick else 30,
     )
     edt_ms = median_ms(lambda: ndimage.distance_transform_edt(values != 100), 5 if quick else 30)
+    update_ms, fresh_ms = _costmap_update_figures(values, spec, quick)
     reference_name = f"np.copy of the {spec.rows}x{spec.cols} float64 grid"
     return [
         Figure(
@@ -151,7 +154,35 @@ def bench_mapping(quick: bool) -> list[Figure]:
             edt_ms,
             "goal <= 20 ms",
         ),
+        Figure(
+            "mapping",
+            "costmap update after a 0.5 m obstacle appeared or went (CostmapUpdater)",
+            update_ms,
+            "ms",
+            "the whole costmap afresh, same reach",
+            fresh_ms,
+        ),
     ]
+
+
+def _costmap_update_figures(values: np.ndarray, spec: GridSpec, quick: bool) -> tuple[float, float]:
+    """The server's costmap update where a box appears and vanishes in turn, and the same
+    costmap computed afresh (both with the server's default reach)."""
+    config = parse_scenario({"world": {"generator": "dungeon"}}, "defaults")
+    reach_m = costmap_reach_m(config, spec)
+    radius_m = config.robots.radius_m
+    boxed = values.copy()
+    boxed[395:405, 395:405] = OCCUPIED
+    updater = CostmapUpdater(config.algorithms.costmap, radius_m, reach_m)
+    whole = Window(0, 0, spec)
+    updater.update(values, whole)
+    turns = iter([boxed, values] * 10**6)
+    update_ms = median_ms(lambda: updater.update(next(turns), whole), 10 if quick else 50)
+    fresh_ms = median_ms(
+        lambda: compute_costmap(values, spec, config.algorithms.costmap, radius_m, reach_m),
+        5 if quick else 30,
+    )
+    return update_ms, fresh_ms
 
 
 def _room_world() -> World:

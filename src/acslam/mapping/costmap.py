@@ -7,10 +7,11 @@ obstacle cells, and the same distance field serves the planners.
 The transform is exact: the squared distance to the nearest occupied cell centre is an
 integer number of cells squared, found by Felzenszwalb and Huttenlocher's lower envelope
 in float64 (exact on integers), and every cost is a function of that integer. So a cell
-gets the same values whatever block or thread computes it. (OpenCV's precise transform,
-used before, rounds in float32 by thread count: on office_a's final 685 x 1157 map, one
-thread gave 73,713 cells other values than two, and two one-thread calls in a row
-differed in 7,532.)
+gets the same values whatever block or thread computes it, and :class:`CostmapUpdater`
+can recompute only the blocks near a change and still equal :func:`compute_costmap` to
+the bit. (OpenCV's precise transform, used before, rounds in float32 by thread count: on
+office_a's final 685 x 1157 map, one thread gave 73,713 cells other values than two, and
+two one-thread calls in a row differed in 7,532.)
 """
 
 from __future__ import annotations
@@ -20,12 +21,16 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from acslam.config import CostmapConfig
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window
 
 LETHAL_COST = math.inf
 """Cost of cells the robot's footprint cannot occupy (planners treat them as walls)."""
+
+TILE_CELLS = 32
+"""Side of the tiles :class:`CostmapUpdater` tracks changes in."""
 
 
 @dataclass(frozen=True)
@@ -34,9 +39,10 @@ class Costmap:
 
     ``cost``: float64, C_max exp(-lambda d) within ``radius_m`` of an occupied cell, 0
     beyond; unknown cells at least ``unknown_cost``; :data:`LETHAL_COST` where ``lethal``.
-    ``distance_m``: distance from each cell centre to the nearest occupied cell centre
-    (``inf`` if the map has no occupied cell). ``lethal``: cells within the robot radius
-    (``<=``) of an occupied cell, occupied cells included.
+    ``distance_m``: distance from each cell centre to the nearest occupied cell centre,
+    at most the ``reach_m`` it was computed with (``inf`` by default, also where the map
+    has no occupied cell). ``lethal``: cells within the robot radius (``<=``) of an
+    occupied cell, occupied cells included.
     """
 
     spec: GridSpec
@@ -106,14 +112,14 @@ def squared_distance_cells(occupied: np.ndarray) -> np.ndarray:
 @numba.njit(cache=True, nogil=True)
 def _fill_costs(
     squared: np.ndarray, values: np.ndarray, cost: np.ndarray, distance_m: np.ndarray,
-    lethal: np.ndarray, resolution_m: float, radius_m: float,
+    lethal: np.ndarray, resolution_m: float, reach_m: float, radius_m: float,
     decay_cost: np.ndarray, unknown_cost: float, robot_radius_m: float,
 ) -> None:  # fmt: skip
     """Every cell's costs from its squared distance (cells^2) and its value."""
     rows, cols = squared.shape
     for r in range(rows):
         for c in range(cols):
-            d = math.sqrt(squared[r, c]) * resolution_m
+            d = min(math.sqrt(squared[r, c]) * resolution_m, reach_m)
             distance_m[r, c] = d
             x = decay_cost[int(squared[r, c])] if d <= radius_m else 0.0
             if values[r, c] == UNKNOWN and x < unknown_cost:
@@ -130,10 +136,13 @@ class _CostRule:
     """The per-cell rule of :func:`compute_costmap`, with its decay costs by squared
     distance in cells tabulated once (the same table wherever a cell is computed)."""
 
-    def __init__(self, spec: GridSpec, config: CostmapConfig, robot_radius_m: float) -> None:
+    def __init__(
+        self, spec: GridSpec, config: CostmapConfig, robot_radius_m: float, reach_m: float
+    ) -> None:
         self.resolution_m = spec.resolution_m
         self.config = config
         self.robot_radius_m = robot_radius_m
+        self.reach_m = reach_m
         last = math.floor((config.radius_m / spec.resolution_m) ** 2) + 1
         distance_m = np.sqrt(np.arange(last + 1, dtype=float)) * spec.resolution_m
         self.decay_cost = np.exp(distance_m * -config.decay_lambda_per_m) * config.cost_max
@@ -144,8 +153,8 @@ class _CostRule:
     ) -> None:  # fmt: skip
         c = self.config
         _fill_costs(
-            squared, values, cost, distance_m, lethal, self.resolution_m, c.radius_m,
-            self.decay_cost, c.unknown_cost, self.robot_radius_m,
+            squared, values, cost, distance_m, lethal, self.resolution_m, self.reach_m,
+            c.radius_m, self.decay_cost, c.unknown_cost, self.robot_radius_m,
         )  # fmt: skip
 
 
@@ -154,21 +163,118 @@ def compute_costmap(
     spec: GridSpec,
     config: CostmapConfig,
     robot_radius_m: float,
+    reach_m: float = math.inf,
 ) -> Costmap:
     """Costmap of OccupancyGrid values (-1 unknown, 0 free, 100 occupied).
 
     Only occupied cells are obstacles; unknown cells are not, they just cost
-    ``max(decay cost, unknown_cost)`` so planners prefer known space.
+    ``max(decay cost, unknown_cost)`` so planners prefer known space. Distances beyond
+    ``reach_m`` are given as ``reach_m`` (it must exceed ``radius_m`` and the robot radius).
     """
     values = np.ascontiguousarray(occupancy_values)
     if values.shape != spec.shape:
         raise ValueError(f"occupancy values have shape {values.shape}, grid is {spec.shape}")
-    rule = _CostRule(spec, config, robot_radius_m)
+    rule = _CostRule(spec, config, robot_radius_m, reach_m)
     cost = np.empty(spec.shape)
     distance_m = np.empty(spec.shape)
     lethal = np.empty(spec.shape, dtype=bool)
     rule.fill(squared_distance_cells(values == OCCUPIED), values, cost, distance_m, lethal)
     return Costmap(spec, cost, distance_m, lethal)
+
+
+def _contains(outer: Window, inner: Window) -> bool:
+    """True when the window ``outer`` covers every cell of ``inner`` (same grid)."""
+    return (
+        outer.row0 <= inner.row0
+        and outer.col0 <= inner.col0
+        and outer.row0 + outer.spec.rows >= inner.row0 + inner.spec.rows
+        and outer.col0 + outer.spec.cols >= inner.col0 + inner.spec.cols
+    )
+
+
+class CostmapUpdater:
+    """The costmap of a window that grows over a map, recomputed only near what changed.
+
+    A cell's costs depend only on the occupied cells within ``reach_m`` of it (its
+    distance is capped there), so after a change only the cells within reach of a
+    changed cell are recomputed, each from a block reaching ``reach_m`` further. Equal to
+    :func:`compute_costmap` with the same ``reach_m`` to the bit. A window that does not
+    contain the last one is computed afresh.
+    """
+
+    def __init__(self, config: CostmapConfig, robot_radius_m: float, reach_m: float) -> None:
+        if not (reach_m > config.radius_m and reach_m > robot_radius_m):
+            raise ValueError(f"reach {reach_m} m must exceed the cost radius and the robot's")
+        self.config = config
+        self.robot_radius_m = robot_radius_m
+        self.reach_m = reach_m
+        self._window: Window | None = None
+        self._values = np.zeros((0, 0), dtype=np.int8)
+        self._cost = np.zeros((0, 0))
+        self._distance_m = np.zeros((0, 0))
+        self._lethal = np.zeros((0, 0), dtype=bool)
+
+    def update(self, values: np.ndarray, window: Window) -> Costmap:
+        """The costmap of ``values``, the window's cells; a new copy each call."""
+        values = np.array(values, order="C")  # kept to find the next call's changes
+        if values.shape != window.spec.shape:
+            raise ValueError(f"values have shape {values.shape}, window is {window.spec.shape}")
+        old = self._window
+        if old is None or not _contains(window, old):
+            fresh = compute_costmap(
+                values, window.spec, self.config, self.robot_radius_m, self.reach_m
+            )
+            self._cost, self._distance_m, self._lethal = fresh.cost, fresh.distance_m, fresh.lethal
+        else:
+            self._grow(window)
+            self._recompute(values, window.spec)
+        self._window, self._values = window, values
+        return Costmap(window.spec, self._cost.copy(), self._distance_m.copy(), self._lethal.copy())
+
+    def _grow(self, window: Window) -> None:
+        """Place the last window's arrays inside the new one; the new cells are unset
+        (their values count as changed)."""
+        old = self._window
+        assert old is not None
+        if old.spec.shape == window.spec.shape:
+            return
+        r, c = old.row0 - window.row0, old.col0 - window.col0
+        rows, cols = old.spec.shape
+        inner = (slice(r, r + rows), slice(c, c + cols))
+        grown_values = np.full(window.spec.shape, 127, dtype=np.int8)  # no OccupancyGrid value
+        grown_values[inner] = self._values
+        self._values = grown_values
+        for name in ("_cost", "_distance_m", "_lethal"):
+            array = getattr(self, name)
+            grown = np.empty(window.spec.shape, dtype=array.dtype)
+            grown[inner] = array
+            setattr(self, name, grown)
+
+    def _recompute(self, values: np.ndarray, spec: GridSpec) -> None:
+        rows, cols = spec.shape
+        changed = values != self._values
+        tiles_r, tiles_c = -(-rows // TILE_CELLS), -(-cols // TILE_CELLS)
+        padded = np.zeros((tiles_r * TILE_CELLS, tiles_c * TILE_CELLS), dtype=bool)
+        padded[:rows, :cols] = changed
+        tiles = padded.reshape(tiles_r, TILE_CELLS, tiles_c, TILE_CELLS).any(axis=(1, 3))
+        if not tiles.any():
+            return
+        reach = math.ceil(self.reach_m / spec.resolution_m) + 1
+        grown = ndimage.binary_dilation(tiles, iterations=-(-reach // TILE_CELLS))
+        labels, count = ndimage.label(grown, structure=np.ones((3, 3)))
+        rule = _CostRule(spec, self.config, self.robot_radius_m, self.reach_m)
+        for box in ndimage.find_objects(labels)[:count]:
+            r0, r1 = box[0].start * TILE_CELLS, min(box[0].stop * TILE_CELLS, rows)
+            c0, c1 = box[1].start * TILE_CELLS, min(box[1].stop * TILE_CELLS, cols)
+            b0, b1 = max(r0 - reach, 0), min(r1 + reach, rows)
+            d0, d1 = max(c0 - reach, 0), min(c1 + reach, cols)
+            squared = squared_distance_cells(values[b0:b1, d0:d1] == OCCUPIED)
+            region = (slice(r0, r1), slice(c0, c1))
+            inner = squared[r0 - b0 : r1 - b0, c0 - d0 : c1 - d0]
+            cost, distance_m = self._cost[region], self._distance_m[region]
+            lethal = self._lethal[region]
+            rule.fill(np.ascontiguousarray(inner), np.ascontiguousarray(values[region]),
+                      cost, distance_m, lethal)  # fmt: skip
 
 
 def known_window(values: np.ndarray, spec: GridSpec, margin_m: float) -> Window:

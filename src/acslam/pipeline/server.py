@@ -41,7 +41,7 @@ from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.exploration.patrol import Patrol
 from acslam.grid import FREE, GridSpec, Window
-from acslam.mapping.costmap import Costmap, compute_costmap, known_window
+from acslam.mapping.costmap import Costmap, CostmapUpdater, known_window
 from acslam.messages import RobotMessage, VelocityCommand
 from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.perception import KeptScan, Perception
@@ -127,6 +127,22 @@ class _Decisions:
     timings_s: dict[str, float]
 
 
+def costmap_reach_m(config: ScenarioConfig, spec: GridSpec) -> float:
+    """How far the server's costmap measures distances: nothing reads one beyond the cost
+    radius, the local planners' obstacle influence or the patrol's clearance; two cell
+    diagonals more keep the planners' bilinear field exact wherever it is below their
+    influence."""
+    algorithms = config.algorithms
+    return (
+        max(
+            algorithms.costmap.radius_m,
+            algorithms.planning.obstacle_influence_m,
+            2 * config.robots.radius_m,
+        )
+        + 2 * math.sqrt(2.0) * spec.resolution_m
+    )
+
+
 class Server:
     """Localizes, maps, explores and plans for the whole team from robot messages."""
 
@@ -163,6 +179,9 @@ class Server:
             algorithms.frontier_detector, spec=map_spec, mapping=algorithms.mapper
         )
         self._clusterer = CLUSTERERS.create(algorithms.clusterer)
+        self._costmaps = CostmapUpdater(
+            algorithms.costmap, config.robots.radius_m, costmap_reach_m(config, map_spec)
+        )
         self._allocator = ALLOCATORS.create(algorithms.allocator)
         self._global_planner = GLOBAL_PLANNERS.create(algorithms.global_planner)
         self._local_planner = LOCAL_PLANNERS.create(
@@ -334,12 +353,7 @@ class Server:
         values = self._mapper.occupancy_values()
         server = self._config.algorithms.server
         window = known_window(values, self._map_spec, server.window_margin_m)
-        costmap = compute_costmap(
-            window.crop(values),
-            window.spec,
-            self._config.algorithms.costmap,
-            self._config.robots.radius_m,
-        )
+        costmap = self._costmaps.update(window.crop(values), window)
         # The distance field is to cell centres, walls are cell squares: half a cell
         # diagonal less makes the planners' clearance a lower bound of the truth.
         field = DistanceField(
