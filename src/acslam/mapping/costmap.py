@@ -260,8 +260,10 @@ class CostmapUpdater:
         if not tiles.any():
             return
         reach = math.ceil(self.reach_m / spec.resolution_m) + 1
-        grown = ndimage.binary_dilation(tiles, iterations=-(-reach // TILE_CELLS))
-        labels, count = ndimage.label(grown, structure=np.ones((3, 3)))
+        # Tiles within reach of a changed tile, diagonals included.
+        square = np.ones((3, 3), dtype=bool)
+        grown = ndimage.binary_dilation(tiles, square, iterations=-(-reach // TILE_CELLS))
+        labels, count = ndimage.label(grown, structure=square)
         rule = _CostRule(spec, self.config, self.robot_radius_m, self.reach_m)
         for box in ndimage.find_objects(labels)[:count]:
             r0, r1 = box[0].start * TILE_CELLS, min(box[0].stop * TILE_CELLS, rows)
