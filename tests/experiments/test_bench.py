@@ -85,3 +85,33 @@ def testpyastar2d_expansions_finds_the_shortest_path_of_its_graph() -> None:
     expanded, cost = pyastar2d_expansions(weights, 0, rows * cols - 1)
     assert cost == pytest.approx(exact, rel=1e-5)
     assert 0 < expanded <= 9 * rows * cols  # each cell pushed at most once per neighbour
+
+
+def test_cycle_summary_reads_the_run_and_its_first_and_last_tenth() -> None:
+    """1,000 cycles over 99.9 s: 10 ms in the first 10 s, 30 ms in the last 10 s, 20 ms
+    between. The first and last tenth of simulated time hold exactly those cycles."""
+    from acslam.benchmarks.team_scaling import cycle_summary, team_figures
+
+    times_s = np.round(np.arange(1000) * 0.1, 1)
+    wall_s = np.where(times_s < 10.0, 0.010, np.where(times_s >= 90.0, 0.030, 0.020))
+    summary = cycle_summary(np.column_stack([times_s, wall_s]))
+    assert summary["mean_ms"] == pytest.approx(20.0)
+    assert summary["max_ms"] == pytest.approx(30.0)
+    assert summary["first_tenth_p95_ms"] == pytest.approx(10.0)
+    assert summary["last_tenth_p95_ms"] == pytest.approx(30.0)
+    assert summary["windows_s"] == [5.0 + 10.0 * k for k in range(10)]
+    assert summary["window_p95_ms"] == pytest.approx([10.0] + [20.0] * 8 + [30.0])
+    one = dict(summary, p95_ms=8.0)
+    result = {
+        "scenario": "dungeon-40",
+        "control_period_ms": 100.0,
+        "teams": [
+            {"robots": 1, "sim_time_s": 99.9, "real_time_factor": 3.0, "cycle": one,
+             "stages": {"slam": 5.0}},
+            {"robots": 3, "sim_time_s": 99.9, "real_time_factor": 2.0, "cycle": summary,
+             "stages": {"slam": 12.0, "mapping": 3.0}},
+        ],
+    }  # fmt: skip
+    figures = team_figures(result)
+    assert [f.ratio for f in figures] == pytest.approx([1.0, 3.0, summary["p95_ms"] / 8.0, 3.0])
+    assert "slowest stage slam p95 12 ms" in figures[2].note

@@ -3,7 +3,8 @@
 Groups: server (cycle per module in a short default run), mapping, scan matching,
 exploration (EWFD vs the naive frontier scan, clustering, allocation), planning (A* vs
 pyastar2d or scipy, FGP per team size), slam (iSAM2 and the loop-closure candidate search
-vs graph size), simulator (real-time factor). ``--quick`` shrinks every problem so the
+vs graph size), simulator (real-time factor), team (the server cycle with 1, 3 and 10
+robots against elapsed time). ``--quick`` shrinks every problem so the
 whole set takes about a minute.
 """
 
@@ -21,7 +22,16 @@ from rich.table import Table
 from acslam import files
 from acslam.benchmarks.core import Figure
 
-GROUPS = ("server", "mapping", "scan matching", "exploration", "planning", "slam", "simulator")
+GROUPS = (
+    "server",
+    "mapping",
+    "scan matching",
+    "exploration",
+    "planning",
+    "slam",
+    "simulator",
+    "team",
+)
 
 
 def _exploration(quick: bool) -> list[Figure]:
@@ -42,7 +52,7 @@ def _exploration(quick: bool) -> list[Figure]:
 
 
 def _runners() -> dict[str, Callable[[bool], list[Figure]]]:
-    from acslam.benchmarks import perception, planning, system
+    from acslam.benchmarks import perception, planning, system, team_scaling
 
     return {
         "server": system.bench_server_cycle,
@@ -52,6 +62,7 @@ def _runners() -> dict[str, Callable[[bool], list[Figure]]]:
         "planning": lambda quick: planning.bench_astar(quick) + planning.bench_fgp(quick),
         "slam": system.bench_isam2,
         "simulator": system.bench_simulator,
+        "team": team_scaling.bench_team,
     }
 
 
