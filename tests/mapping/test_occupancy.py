@@ -9,7 +9,13 @@ import pytest
 
 from acslam.config import MappingConfig
 from acslam.grid import GridSpec
-from acslam.mapping.occupancy import FIXED_POINT_SCALE, LogOddsGrid, TeamMap, grid_spec_for_bounds
+from acslam.mapping.occupancy import (
+    FIXED_POINT_SCALE,
+    LogOddsGrid,
+    TeamMap,
+    _add_to_grids,
+    grid_spec_for_bounds,
+)
 
 QUANTUM = 1.0 / FIXED_POINT_SCALE
 
@@ -230,3 +236,38 @@ def test_invalid_zero_readings_change_nothing() -> None:
         np.zeros(8), np.linspace(-np.pi, np.pi, 8, endpoint=False), np.array([2.0, 2.0, 0.0])
     )
     assert not grid.known_mask().any()
+
+
+def test_adding_an_update_to_the_grids_equals_numpy_indexing() -> None:
+    """The one-pass kernel against NumPy on random unique cells: both grids and the
+    window get sign x increments, the block spans the cells, and a window that misses a
+    cell is reported and left alone."""
+    rng = np.random.default_rng(5)
+    shape = (60, 80)
+    flat = rng.choice(shape[0] * shape[1], size=500, replace=False)
+    flat = flat[(flat // shape[1] >= 10) & (flat // shape[1] < 50)]  # rows 10..49
+    increments = rng.integers(-1000, 1000, size=len(flat))
+    rows, cols = np.divmod(flat, shape[1])
+    for sign in (1, -1):
+        global_acc = rng.integers(-50, 50, size=shape)
+        robot_acc = rng.integers(-50, 50, size=shape)
+        window = rng.integers(-50, 50, size=(45, 80))  # grid rows 8..52
+        expected_global, expected_robot, expected_window = (
+            global_acc.copy(),
+            robot_acc.copy(),
+            window.copy(),
+        )
+        expected_global.reshape(-1)[flat] += sign * increments
+        expected_robot.reshape(-1)[flat] += sign * increments
+        expected_window[rows - 8, cols] += sign * increments
+        result = _add_to_grids(flat, increments, sign, global_acc, robot_acc, True, window, 8, 0)
+        assert result == (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1, True)
+        assert np.array_equal(global_acc, expected_global)
+        assert np.array_equal(robot_acc, expected_robot)
+        assert np.array_equal(window, expected_window)
+        narrow = window[:, :40].copy()
+        before = narrow.copy()
+        *_, inside = _add_to_grids(
+            flat, increments, sign, global_acc, robot_acc, True, narrow, 8, 0
+        )
+        assert not inside and np.array_equal(narrow, before)

@@ -114,6 +114,7 @@ def bench_mapping(quick: bool) -> list[Figure]:
         grid.integrate(ranges, angles, pose)
 
     scan_ms = median_ms(integrate_one, 60 if quick else 300)
+    submap_ms = _submap_scan_ms(spec, angles, quick)
     team = TeamMap(grid.config, spec=spec)
     team.add_scan(0, "moved", scans[0][0], angles, scans[0][1])
     shifts = iter(range(10**9))
@@ -142,6 +143,14 @@ def bench_mapping(quick: bool) -> list[Figure]:
             "goal <= 2 ms",
         ),
         Figure(
+            "mapping",
+            "SubmapTeamMap.add_scan (global + robot + submap), driving 3 cm per scan",
+            submap_ms,
+            "ms",
+            "scan integration into one grid",
+            scan_ms,
+        ),
+        Figure(
             "mapping", "TeamMap.move_scan (global + robot)", move_ms, "ms", reference_name, copy_ms
         ),
         correction,
@@ -163,6 +172,22 @@ def bench_mapping(quick: bool) -> list[Figure]:
             fresh_ms,
         ),
     ]
+
+
+def _submap_scan_ms(spec: GridSpec, angles: np.ndarray, quick: bool) -> float:
+    """A scan into the submaps mapper, the robot driving 3 cm and turning 0.02 rad per
+    scan (so submaps open and close as in a run)."""
+    poses = [np.array([-3.0 + 0.03 * k, -1.0 + 0.01 * k, 0.02 * k]) for k in range(200)]
+    scans = [(_room_ranges(pose, angles, 7.0), pose) for pose in poses]
+    submaps = SubmapTeamMap(SubmapMappingConfig(max_range_m=8.0), spec=spec)
+    index = iter(range(10**9))
+
+    def add_one() -> None:
+        k = next(index)
+        ranges, pose = scans[k % len(scans)]
+        submaps.add_scan(0, k, ranges, angles, pose)
+
+    return median_ms(add_one, 60 if quick else 300)
 
 
 def _costmap_update_figures(values: np.ndarray, spec: GridSpec, quick: bool) -> tuple[float, float]:

@@ -94,20 +94,8 @@ class SubmapTeamMap(FusedGrids):
         pose = np.array(pose, dtype=np.float64).reshape(3)
         submap = self._submap_for(int(robot_id), int(index), pose)
         update = self.global_grid.scan_update(ranges, angles, pose, range_max_m)
-        self._apply(int(robot_id), update, 1)
-        r0, c0 = submap.first_cell
-        local = submap.accumulator
-        if update.block is not None:
-            row_start, row_stop, col_start, col_stop = update.block
-            if not (
-                row_start >= r0
-                and col_start >= c0
-                and row_stop - r0 <= local.shape[0]
-                and col_stop - c0 <= local.shape[1]
-            ):
-                raise ValueError(f"scan {index} changes cells outside its submap's window")
-        rows, cols = update.cells
-        local[rows - r0, cols - c0] += update.increments_fixed  # flat indices are unique
+        if not self._apply(int(robot_id), update, 1, (submap.accumulator, *submap.first_cell)):
+            raise ValueError(f"scan {index} changes cells outside its submap's window")
         submap.scans += 1
         self._scan_count += 1
 
