@@ -214,9 +214,9 @@ def _add_to_grids(
     """Add ``sign`` x ``increments`` at ``flat_indices`` (of the global grid's cells) to
     the global and the robot accumulator, and, if ``has_window``, to the window's
     accumulator, whose cell (0, 0) is the grid's (``window_first_row``,
-    ``window_first_col``). One pass, no temporaries: with the NumPy fancy-index adds
-    (and the rows and columns they needed) it replaces, a submap scan of 360 beams cost
-    0.81 ms instead of 0.62 ms on a 1,200 x 1,600 grid.
+    ``window_first_col``). One pass, no temporaries: a submap scan of 360 beams on a
+    1,200 x 1,600 grid takes 0.62 ms, against 0.81 ms with the NumPy fancy-index adds
+    (and the rows and columns they needed) that this replaces.
 
     Returns the block the cells span, ``(row_start, row_stop, col_start, col_stop)``
     (empty: all zero), and whether the window holds every cell (the window's accumulator
