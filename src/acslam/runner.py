@@ -356,7 +356,18 @@ def _metrics(
 
 
 PHASE_SHARE = 0.1
-"""The patrol's cost is compared between its first and its last tenth."""
+"""A phase's cost is compared between its first and its last tenth."""
+
+
+def tenths_p95_ms(samples: np.ndarray, start_s: float, end_s: float) -> tuple[float, float] | None:
+    """p95 in ms of a stage's ``[simulated time s, wall s]`` samples over the first and the
+    last ``PHASE_SHARE`` of ``[start_s, end_s]``; None if either holds none."""
+    tenth_s = PHASE_SHARE * (end_s - start_s)
+    first = samples[(samples[:, 0] >= start_s) & (samples[:, 0] < start_s + tenth_s), 1]
+    last = samples[samples[:, 0] >= end_s - tenth_s, 1]
+    if not (len(first) and len(last)):
+        return None
+    return 1000 * float(np.percentile(first, 95)), 1000 * float(np.percentile(last, 95))
 
 
 def _patrol_metrics(
@@ -368,14 +379,11 @@ def _patrol_metrics(
     if patrol_s <= 0 or at_explored is None or end_s <= at_explored.time_s:
         return {}
     start_s = at_explored.time_s
-    tenth_s = PHASE_SHARE * (end_s - start_s)
     stages = {}
     for stage, samples in zip(record.stage_names, record.stage_timings, strict=True):
-        first = samples[(samples[:, 0] >= start_s) & (samples[:, 0] < start_s + tenth_s), 1]
-        last = samples[samples[:, 0] >= end_s - tenth_s, 1]
-        if len(first) and len(last):
-            first_ms = 1000 * float(np.percentile(first, 95))
-            last_ms = 1000 * float(np.percentile(last, 95))
+        tenths = tenths_p95_ms(samples, start_s, end_s)
+        if tenths is not None:
+            first_ms, last_ms = tenths
             stages[str(stage)] = {
                 "first_tenth_p95_ms": first_ms,
                 "last_tenth_p95_ms": last_ms,

@@ -16,36 +16,31 @@ from pathlib import Path
 import numpy as np
 
 from acslam.benchmarks.core import Figure
-from acslam.eval.report import RunRecord
-from acslam.runner import run_exploration
+from acslam.eval.report import TIMING_WINDOW_S, RunRecord, window_p95_ms
+from acslam.runner import run_exploration, tenths_p95_ms
 from acslam.scenario import load_scenario
 from acslam.text import plural
 
 TEAM_SIZES = (1, 3, 10)
-TENTH = 0.1
-WINDOW_S = 10.0
 
 
 def cycle_summary(samples: np.ndarray) -> dict:
     """Of a stage's ``[simulated time s, wall s]`` samples: mean, p95, p99 and max in ms
     over the run, p95 over its first and last tenth of simulated time, and the p95 per
-    ``WINDOW_S`` of simulated time (``windows_s``, ``window_p95_ms``)."""
-    times_s, wall_ms = samples[:, 0], 1000 * samples[:, 1]
-    start_s, end_s = float(times_s.min()), float(times_s.max())
-    tenth_s = TENTH * (end_s - start_s)
-    first = wall_ms[times_s <= start_s + tenth_s]
-    last = wall_ms[times_s >= end_s - tenth_s]
-    windows = np.floor(times_s / WINDOW_S).astype(int)
-    starts = np.unique(windows)
+    ``TIMING_WINDOW_S`` of simulated time (``windows_s``, ``window_p95_ms``)."""
+    wall_ms = 1000 * samples[:, 1]
+    times_s = samples[:, 0]
+    first_ms, last_ms = tenths_p95_ms(samples, float(times_s.min()), float(times_s.max()))
+    windows_s, p95_ms = window_p95_ms(samples)
     return {
         "mean_ms": float(wall_ms.mean()),
         "p95_ms": float(np.percentile(wall_ms, 95)),
         "p99_ms": float(np.percentile(wall_ms, 99)),
         "max_ms": float(wall_ms.max()),
-        "first_tenth_p95_ms": float(np.percentile(first, 95)),
-        "last_tenth_p95_ms": float(np.percentile(last, 95)),
-        "windows_s": ((starts + 0.5) * WINDOW_S).tolist(),
-        "window_p95_ms": [float(np.percentile(wall_ms[windows == w], 95)) for w in starts],
+        "first_tenth_p95_ms": first_ms,
+        "last_tenth_p95_ms": last_ms,
+        "windows_s": windows_s,
+        "window_p95_ms": p95_ms,
     }
 
 
@@ -132,7 +127,7 @@ def bench_team(quick: bool) -> list[Figure]:
 
 
 def plot_team_scaling(result: dict, path: Path) -> Path:
-    """The cycle's p95 per ``WINDOW_S`` of simulated time, one line per team size."""
+    """The cycle's p95 per ``TIMING_WINDOW_S`` of simulated time, one line per team size."""
     from acslam.eval.plotting import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(8.0, 3.6))
@@ -142,7 +137,7 @@ def plot_team_scaling(result: dict, path: Path) -> Path:
     period_ms = result["control_period_ms"]
     ax.axhline(period_ms, color="tab:red", ls=":", label=f"control period {period_ms:.0f} ms")
     ax.set_xlabel("simulated time [s]")
-    ax.set_ylabel(f"cycle p95 per {WINDOW_S:.0f} s [ms]")
+    ax.set_ylabel(f"cycle p95 per {TIMING_WINDOW_S:.0f} s [ms]")
     ax.set_yscale("log")
     ax.legend(fontsize=8)
     ax.set_title(f"Server cycle against team size: {Path(result['scenario']).stem}")

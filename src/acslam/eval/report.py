@@ -366,6 +366,15 @@ def stage_label(name: str) -> str:
     return "whole cycle" if name == "cycle" else name.replace("_", " ")
 
 
+def window_p95_ms(samples: np.ndarray) -> tuple[list[float], list[float]]:
+    """Of a stage's ``[simulated time s, wall s]`` samples: the centre of each
+    ``TIMING_WINDOW_S`` window of simulated time that holds some, and their p95 in ms."""
+    windows = np.floor(samples[:, 0] / TIMING_WINDOW_S).astype(int)
+    starts = np.unique(windows)
+    p95_ms = [float(1000 * np.percentile(samples[windows == w, 1], 95)) for w in starts]
+    return ((starts + 0.5) * TIMING_WINDOW_S).tolist(), p95_ms
+
+
 def figure_cycle_time(record: RunRecord, path: Path) -> None:
     """p95 of the whole cycle and of each stage per 10 s of simulated time, against the
     control period: whether the cost of a cycle grows as the run goes on."""
@@ -373,11 +382,8 @@ def figure_cycle_time(record: RunRecord, path: Path) -> None:
     for name, samples in zip(record.stage_names, record.stage_timings, strict=True):
         if len(samples) == 0:
             continue
-        windows = np.floor(samples[:, 0] / TIMING_WINDOW_S).astype(int)
-        starts = np.unique(windows)
-        p95_ms = [1000 * np.percentile(samples[windows == w, 1], 95) for w in starts]
         style = {"color": "k", "lw": 2} if name == "cycle" else {"lw": 1}
-        ax.plot((starts + 0.5) * TIMING_WINDOW_S, p95_ms, label=stage_label(str(name)), **style)
+        ax.plot(*window_p95_ms(samples), label=stage_label(str(name)), **style)
     period_ms = 1000 * float(record.control_period_s)
     ax.axhline(period_ms, color="tab:red", ls=":", label=f"control period {period_ms:.0f} ms")
     ax.set_xlabel("simulated time [s]")
