@@ -253,8 +253,7 @@ class SlamConfig(StageParams):
     """Factor-graph SLAM (thesis §4.4.1-4.4.2): the ``isam2`` localizer. Noise sigmas are ours.
 
     Odometry sigmas grow with the distance / angle travelled between keyframes, never
-    below the ``*_min_*`` floors. ``planar_sigma`` holds z, roll and pitch of the SE(3)
-    poses near zero (the robots are planar). ``huber_k`` is the Huber threshold on the
+    below the ``*_min_*`` floors. ``huber_k`` is the Huber threshold on the
     whitened (Mahalanobis) residual norm of an observation factor; 2.8 is the 95 %
     quantile of a 3-dof chi distribution, so inliers keep their full Gaussian weight.
     The association gates: a Euclidean pre-gate (``association_gate_m``, widened for a
@@ -285,14 +284,13 @@ class SlamConfig(StageParams):
     0.01 rad leave the heading about 5 mrad free (1 sigma), 0.25 m at the far end of a
     50 m building (office_b seed 0: the whole map turned by 6.8 mrad, worst RMSE 0.188 m;
     at 1 mm and 1 mrad, 1.3 mrad and 0.044 m). The simulator's start poses are exact, so
-    the defaults are 1 mm and 1 mrad (as ``planar_sigma``); widen them to what placing
+    the defaults are 1 mm and 1 mrad; widen them to what placing
     real robots achieves.
     """
 
     name: Literal["isam2"] = "isam2"
     prior_sigma_xy_m: PositiveFloat = 0.001
     prior_sigma_theta_rad: PositiveFloat = 0.001
-    planar_sigma: PositiveFloat = 0.001
     odom_sigma_xy_per_m: PositiveFloat = 0.05
     odom_sigma_theta_per_rad: PositiveFloat = 0.05
     odom_sigma_theta_per_m: NonNegativeFloat = 0.02

@@ -15,9 +15,12 @@ from acslam.slam.factors import (
     observation_noise,
     odometry_sigmas,
     planar_compose_jacobians,
-    planar_to_pose3,
-    pose3_to_planar,
+    planar_to_pose2,
+    point_to_body,
+    point_to_world,
+    pose2_to_planar,
     robot_observation_factor,
+    rotation_about_z,
     sensor_covariance,
 )
 
@@ -25,11 +28,11 @@ POSE = keys.pose_key(3, 7)
 LANDMARK = keys.landmark_key(11)
 
 
-def _random_pose(rng: np.random.Generator) -> gtsam.Pose3:
-    return gtsam.Pose3.Expmap(rng.normal(size=6))
+def _random_pose(rng: np.random.Generator) -> gtsam.Pose2:
+    return gtsam.Pose2.Expmap(rng.normal(size=3))
 
 
-def _error(factor: gtsam.CustomFactor, pose: gtsam.Pose3, point: np.ndarray) -> np.ndarray:
+def _error(factor: gtsam.CustomFactor, pose: gtsam.Pose2, point: np.ndarray) -> np.ndarray:
     values = gtsam.Values()
     values.insert(POSE, pose)
     values.insert(LANDMARK, gtsam.Point3(*point))
@@ -53,8 +56,8 @@ def test_observation_jacobians_match_central_differences(seed: int) -> None:
     values.insert(LANDMARK, gtsam.Point3(*point))
     # With a unit noise model the linearised factor holds the raw Jacobians.
     linear = factor.linearize(values)
-    h_pose, h_point = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
-    num_pose = _central_differences(lambda step: _error(factor, pose.retract(step), point), 6)
+    h_pose, h_point = np.asarray(linear.getA()[:, :3]), np.asarray(linear.getA()[:, 3:])
+    num_pose = _central_differences(lambda step: _error(factor, pose.retract(step), point), 3)
     num_point = _central_differences(lambda step: _error(factor, pose, point + step), 3)
     np.testing.assert_allclose(h_pose, num_pose, atol=1e-6)
     np.testing.assert_allclose(h_point, num_point, atol=1e-6)
@@ -63,7 +66,7 @@ def test_observation_jacobians_match_central_differences(seed: int) -> None:
 OBSERVED = keys.pose_key(4, 2)
 
 
-def _robot_error(factor: gtsam.CustomFactor, pose_a: gtsam.Pose3, pose_b: gtsam.Pose3):
+def _robot_error(factor: gtsam.CustomFactor, pose_a: gtsam.Pose2, pose_b: gtsam.Pose2):
     values = gtsam.Values()
     values.insert(POSE, pose_a)
     values.insert(OBSERVED, pose_b)
@@ -81,9 +84,9 @@ def test_robot_observation_jacobians_match_central_differences(seed: int) -> Non
     values.insert(POSE, pose_a)
     values.insert(OBSERVED, pose_b)
     linear = factor.linearize(values)
-    h_a, h_b = np.asarray(linear.getA()[:, :6]), np.asarray(linear.getA()[:, 6:])
-    num_a = _central_differences(lambda step: _robot_error(factor, pose_a.retract(step), pose_b), 6)
-    num_b = _central_differences(lambda step: _robot_error(factor, pose_a, pose_b.retract(step)), 6)
+    h_a, h_b = np.asarray(linear.getA()[:, :3]), np.asarray(linear.getA()[:, 3:])
+    num_a = _central_differences(lambda step: _robot_error(factor, pose_a.retract(step), pose_b), 3)
+    num_b = _central_differences(lambda step: _robot_error(factor, pose_a, pose_b.retract(step)), 3)
     np.testing.assert_allclose(h_a, num_a, atol=1e-6)
     np.testing.assert_allclose(h_b, num_b, atol=1e-6)
 
@@ -100,7 +103,7 @@ def test_robot_observation_error_of_a_known_configuration() -> None:
         gtsam.noiseModel.Unit.Create(3),
     )
     error = _robot_error(
-        factor, planar_to_pose3(np.zeros(3)), planar_to_pose3(np.array([2.0, 1.0, np.pi / 2]))
+        factor, planar_to_pose2(np.zeros(3)), planar_to_pose2(np.array([2.0, 1.0, np.pi / 2]))
     )
     np.testing.assert_allclose(error, [0.1, -0.1, 0.0], atol=1e-12)
 
@@ -111,7 +114,7 @@ def test_observation_error_of_a_known_configuration() -> None:
     factor = observation_factor(
         POSE, LANDMARK, np.array([2.9, 0.1, 0.5]), gtsam.noiseModel.Unit.Create(3)
     )
-    pose = planar_to_pose3(np.array([1.0, 2.0, np.pi / 2]))
+    pose = planar_to_pose2(np.array([1.0, 2.0, np.pi / 2]))
     np.testing.assert_allclose(
         _error(factor, pose, np.array([1.0, 5.0, 0.5])), [0.1, -0.1, 0.0], atol=1e-12
     )
@@ -135,16 +138,31 @@ def test_pose_lever_jacobian_matches_retract(seed: int) -> None:
     numeric = np.column_stack(
         [
             (
-                np.asarray(pose.retract(eps * e).transformFrom(point))
-                - np.asarray(pose.retract(-eps * e).transformFrom(point))
+                point_to_world(pose.retract(eps * e), point)
+                - point_to_world(pose.retract(-eps * e), point)
             )
             / (2 * eps)
-            for e in np.eye(6)
+            for e in np.eye(3)
         ]
     )
     np.testing.assert_allclose(
-        pose_lever_jacobian(pose.rotation().matrix(), point), numeric, atol=1e-6
+        pose_lever_jacobian(rotation_about_z(pose.theta()), point), numeric, atol=1e-6
     )
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_point_to_the_body_frame_and_back_is_the_point_and_keeps_its_height(seed: int) -> None:
+    """point_to_body inverts point_to_world; its Jacobians match central differences
+    through GTSAM's retract; the pose never moves z."""
+    rng = np.random.default_rng(seed)
+    pose, point = _random_pose(rng), rng.normal(size=3) * 3
+    body, h_pose, h_point = point_to_body(pose, point)
+    np.testing.assert_allclose(point_to_world(pose, body), point, atol=1e-12)
+    assert body[2] == point[2]
+    num_pose = _central_differences(lambda step: point_to_body(pose.retract(step), point)[0], 3)
+    num_point = _central_differences(lambda step: point_to_body(pose, point + step)[0], 3)
+    np.testing.assert_allclose(h_pose, num_pose, atol=1e-6)
+    np.testing.assert_allclose(h_point, num_point, atol=1e-6)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -164,7 +182,7 @@ def test_planar_compose_jacobians(seed: int) -> None:
 
 def test_planar_round_trip_and_odometry_sigmas() -> None:
     pose = np.array([1.5, -2.0, 2.5])
-    np.testing.assert_allclose(pose3_to_planar(planar_to_pose3(pose)), pose, atol=1e-12)
+    np.testing.assert_allclose(pose2_to_planar(planar_to_pose2(pose)), pose, atol=1e-12)
     config = SlamConfig()
     floor = odometry_sigmas(config, 0.0, 0.0)
     assert floor[0] == config.odom_sigma_min_xy_m

@@ -40,10 +40,13 @@ def euclidean_gate(point: np.ndarray, landmarks: np.ndarray, gate_m: float) -> n
 
 
 def pose_lever_jacobian(rotation: np.ndarray, point_body: np.ndarray) -> np.ndarray:
-    """d(T p)/d xi for a Pose3 right perturbation xi = [omega, v]: R [-[p]x, I] (3x6)."""
-    px, py, pz = point_body
-    skew = np.array([[0.0, -pz, py], [pz, 0.0, -px], [-py, px, 0.0]])
-    return rotation @ np.hstack([-skew, np.eye(3)])
+    """d(T p)/d xi for a Pose2 right perturbation xi = [v_x, v_y, omega] of a 3D point
+    (3x3): R [I, [-p_y, p_x]] in the plane, nothing on z. ``rotation`` is the pose's 3x3
+    rotation about z."""
+    jacobian = np.zeros((3, 3))
+    jacobian[:2, :2] = rotation[:2, :2]
+    jacobian[:2, 2] = rotation[:2, :2] @ np.array([-point_body[1], point_body[0]])
+    return jacobian
 
 
 def measurement_covariance(
@@ -120,7 +123,7 @@ def innovation_covariance(
 ) -> np.ndarray:
     """Covariance of d = T p - l for a landmark l and a pose T (right perturbation).
 
-    ``lever`` is d(T p)/d xi (3x6, :func:`pose_lever_jacobian`), ``cross_cov`` the 6x3
+    ``lever`` is d(T p)/d xi (3x3, :func:`pose_lever_jacobian`), ``cross_cov`` the 3x3
     pose-landmark block of their joint marginal (None: neglected). With a re-observed
     landmark the cross term cancels most of the shared drift: S is the uncertainty of the
     landmark *relative to the robot*, not the sum of the two absolute uncertainties.

@@ -1,9 +1,10 @@
 """Centralized multi-robot SLAM back end: one iSAM2 over all robots' poses and landmarks.
 
-Graph (thesis eqs. 4.17-4.20): a prior on each robot's known start pose, SE(3) odometry
-between-factors between consecutive keyframes, and Huber-robust landmark observation
-factors, softly associated by PDA (eqs. 4.21-4.24) to landmarks shared by all robots,
-and Huber-robust factors between two robots' keyframes when one robot sees another.
+Graph (thesis eqs. 4.17-4.20): a prior on each robot's known start pose, planar odometry
+between-factors (``Pose2``: see :mod:`acslam.slam.factors`) between consecutive keyframes,
+and Huber-robust landmark observation factors, softly associated by PDA (eqs. 4.21-4.24)
+to landmarks shared by all robots, and Huber-robust factors between two robots' keyframes
+when one robot sees another.
 
 Keyframes: a robot gets a new pose variable only when the odometry accumulated since its
 last keyframe exceeds ``keyframe_distance_m`` of path or ``keyframe_angle_rad`` of turn,
@@ -37,9 +38,10 @@ from acslam.slam.factors import (
     odometry_noise,
     odometry_sigmas,
     planar_compose_jacobians,
-    planar_to_pose3,
-    pose3_to_planar,
+    planar_to_pose2,
+    pose2_to_planar,
     prior_noise,
+    rotation_about_z,
 )
 from acslam.slam.keyframe_scans import KeyframeScans
 from acslam.slam.landmark_association import LandmarkAssociation, chain_variance
@@ -63,17 +65,15 @@ class _Robot:
     cum_var_xy: list[float] = field(default_factory=lambda: [0.0])
     cum_var_theta: list[float] = field(default_factory=lambda: [0.0])
     cum_distance_m: list[float] = field(default_factory=lambda: [0.0])
-    # The latest iSAM2 marginal of one of this robot's keyframes: (keyframe index, 6x6).
+    # The latest iSAM2 marginal of one of this robot's keyframes: (keyframe index, 3x3).
     pose_marginal: tuple[int, np.ndarray] | None = None
     calibration: OdometryCalibration | None = None
 
 
-def _planar_covariance(pose6_cov: np.ndarray, yaw: float) -> np.ndarray:
-    """Pose3 body-frame 6x6 marginal -> world-frame ``[x, y, theta]`` 3x3 covariance."""
-    body = pose6_cov[np.ix_([3, 4, 2], [3, 4, 2])]
-    c, s = np.cos(yaw), np.sin(yaw)
-    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return rot @ body @ rot.T
+def _planar_covariance(body_cov: np.ndarray, theta_rad: float) -> np.ndarray:
+    """Pose2 body-frame 3x3 marginal -> world-frame ``[x, y, theta]`` covariance."""
+    rot = rotation_about_z(theta_rad)
+    return rot @ body_cov @ rot.T
 
 
 class SlamBackend:
@@ -109,11 +109,10 @@ class SlamBackend:
         # Per pose key, the position last reported (by moved_keyframes, or when first
         # estimated): users placed the keyframe's scans there.
         self._reported_keys = np.zeros(0, dtype=np.uint64)
-        self._reported_positions = np.zeros((0, 3))
-        # The estimate's pose keys (sorted) and their extractPose3 rows: rotation matrix
-        # row by row, then translation.
+        self._reported_positions = np.zeros((0, 2))
+        # The estimate's pose keys (sorted) and their ``[x, y, theta]`` rows.
         self._pose_keys = np.zeros(0, dtype=np.uint64)
-        self._pose_table = np.zeros((0, 12))
+        self._pose_table = np.zeros((0, 3))
         self.skipped_messages: dict[str, int] = {"odometry": 0, "landmarks": 0, "scan": 0}
         self.update_durations_s: list[float] = []
         self.association = LandmarkAssociation(self)
@@ -126,9 +125,9 @@ class SlamBackend:
                 int(robot_id), [key], [float("nan")], calibration=calibration
             )
             self._graph.add(
-                gtsam.PriorFactorPose3(key, planar_to_pose3(start), prior_noise(config))
+                gtsam.PriorFactorPose2(key, planar_to_pose2(start), prior_noise(config))
             )
-            self._initial.insert(key, planar_to_pose3(start))
+            self._initial.insert(key, planar_to_pose2(start))
 
     # ------------------------------------------------------------------ input
 
@@ -165,13 +164,13 @@ class SlamBackend:
     def _new_keyframe(self, robot: _Robot, stamp: float) -> None:
         previous = robot.pose_keys[-1]
         key = keys.pose_key(robot.robot_id, len(robot.pose_keys))
-        relative = planar_to_pose3(robot.offset)
+        relative = planar_to_pose2(robot.offset)
         noise = odometry_noise(self.config, robot.distance_m, robot.angle_rad)
-        self._graph.add(gtsam.BetweenFactorPose3(previous, key, relative, noise))
+        self._graph.add(gtsam.BetweenFactorPose2(previous, key, relative, noise))
         self._initial.insert(key, self.pose_estimate(previous).compose(relative))
         self._odometry_variances[key] = np.asarray(noise.sigmas()) ** 2
         sigmas = np.asarray(noise.sigmas())
-        robot.cum_var_xy.append(robot.cum_var_xy[-1] + sigmas[3] ** 2)
+        robot.cum_var_xy.append(robot.cum_var_xy[-1] + sigmas[0] ** 2)
         robot.cum_var_theta.append(robot.cum_var_theta[-1] + sigmas[2] ** 2)
         robot.cum_distance_m.append(robot.cum_distance_m[-1] + robot.distance_m)
         robot.pose_keys.append(key)
@@ -283,7 +282,7 @@ class SlamBackend:
         if len(self._landmark_positions):
             self._landmark_positions = np.asarray(gtsam.utilities.extractPoint3(estimate))
         self._pose_keys, self._pose_table = self._pose_rows(estimate)
-        self._moved = self._report_moves(self._pose_keys, self._pose_table[:, 9:12])
+        self._moved = self._report_moves(self._pose_keys, self._pose_table[:, :2])
 
     def _report_moves(self, pose_keys: np.ndarray, positions: np.ndarray) -> list[tuple[int, int]]:
         """Keyframes now more than correction_threshold_m from where they were last
@@ -309,12 +308,12 @@ class SlamBackend:
 
     @staticmethod
     def _pose_rows(values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
-        """Sorted pose keys of ``values`` and their (N, 12) extractPose3 rows."""
+        """Sorted pose keys of ``values`` and their (N, 3) ``[x, y, theta]`` rows."""
         all_keys = np.asarray(values.keys(), dtype=np.uint64)
         pose_keys = all_keys[(all_keys >> np.uint64(56)) == _POSE_CHAR_CODE]
         if len(pose_keys) == 0:
-            return pose_keys, np.zeros((0, 12))
-        table = np.asarray(gtsam.utilities.extractPose3(values)).reshape(-1, 12)
+            return pose_keys, np.zeros((0, 3))
+        table = np.asarray(gtsam.utilities.extractPose2(values)).reshape(-1, 3)
         return np.sort(pose_keys), table
 
     def _marginal(self, key: int) -> np.ndarray:
@@ -329,9 +328,9 @@ class SlamBackend:
             self._marginals[key] = cov
         return cov
 
-    def reference(self, robot: _Robot) -> tuple[int | None, gtsam.Pose3, np.ndarray]:
+    def reference(self, robot: _Robot) -> tuple[int | None, gtsam.Pose2, np.ndarray]:
         """The robot's latest *optimised* keyframe (None before the first update), its
-        pose, and its 6x6 covariance (:meth:`_keyframe_marginal`) plus the odometry
+        pose, and its 3x3 covariance (:meth:`_keyframe_marginal`) plus the odometry
         variances of the pending keyframes after it (the pose whose cross-covariances with
         the landmarks iSAM2 can give)."""
         index, pending = self._latest_optimised(robot)
@@ -340,12 +339,12 @@ class SlamBackend:
             return None, self.pose_estimate(first), self.pose_covariance(robot)
         key = robot.pose_keys[index]
         covariance = self._keyframe_marginal(robot, index) + np.diag(pending)
-        return key, self._estimate.atPose3(key), covariance
+        return key, self._estimate.atPose2(key), covariance
 
     def _latest_optimised(self, robot: _Robot) -> tuple[int | None, np.ndarray]:
         """Index of the robot's latest optimised keyframe (None before the first update)
         and the summed odometry variances of the pending keyframes after it."""
-        pending = np.zeros(6)
+        pending = np.zeros(3)
         for index in range(len(robot.pose_keys) - 1, -1, -1):
             if self._estimate.exists(robot.pose_keys[index]):
                 return index, pending
@@ -355,7 +354,7 @@ class SlamBackend:
     def landmark_blocks(
         self, ref_key: int | None, columns: list[int]
     ) -> tuple[np.ndarray | None, list[np.ndarray], list[np.ndarray | None]]:
-        """The reference pose's 6x6 marginal, and the marginal covariance of each landmark
+        """The reference pose's 3x3 marginal, and the marginal covariance of each landmark
         column and its cross-covariance with the reference pose, from one iSAM2 joint
         marginal (None where unavailable)."""
         lm_covs: list[np.ndarray] = []
@@ -384,33 +383,28 @@ class SlamBackend:
         pose_cov = None if joint is None else np.asarray(joint.at(ref_key, ref_key))
         return pose_cov, lm_covs, cross
 
-    def pose_estimate(self, key: int) -> gtsam.Pose3:
+    def pose_estimate(self, key: int) -> gtsam.Pose2:
         """The optimised pose of ``key``, or its initial guess before the first update."""
         if self._estimate.exists(key):
-            return self._estimate.atPose3(key)
-        return self._initial.atPose3(key)
+            return self._estimate.atPose2(key)
+        return self._initial.atPose2(key)
 
     def planar_poses(self, pose_keys: np.ndarray) -> np.ndarray:
-        """(k, 3) ``[x, y, yaw]`` of many keyframes at once: :meth:`pose_estimate` in the
-        plane, vectorised over the last update's estimate. The yaw is atan2(R10, R00) of
-        the rotation, GTSAM's own yaw up to rounding (for any small roll and pitch, since
-        both read the same Z-Y-X angles). Keyframes not optimised yet are read one by one.
-        """
+        """(k, 3) ``[x, y, theta]`` of many keyframes at once: :meth:`pose_estimate`,
+        vectorised over the last update's estimate. Keyframes not optimised yet are read
+        one by one."""
         pose_keys = np.asarray(pose_keys, dtype=np.uint64)
         rows = np.searchsorted(self._pose_keys, pose_keys)
         found = rows < len(self._pose_keys)
         found[found] = self._pose_keys[rows[found]] == pose_keys[found]
-        table = self._pose_table[rows[found]]
         poses = np.empty((len(pose_keys), 3))
-        poses[found] = np.column_stack(
-            [table[:, 9], table[:, 10], np.arctan2(table[:, 3], table[:, 0])]
-        )
+        poses[found] = self._pose_table[rows[found]]
         for k in np.flatnonzero(~found):
-            poses[k] = pose3_to_planar(self.pose_estimate(int(pose_keys[k])))
+            poses[k] = pose2_to_planar(self.pose_estimate(int(pose_keys[k])))
         return poses
 
     def pose_covariance(self, robot: _Robot) -> np.ndarray:
-        """6x6 marginal of the latest optimised keyframe (:meth:`_keyframe_marginal`); a
+        """3x3 marginal of the latest optimised keyframe (:meth:`_keyframe_marginal`); a
         pending keyframe adds its odometry variances."""
         index, pending = self._latest_optimised(robot)
         if index is None:
@@ -418,7 +412,7 @@ class SlamBackend:
         return self._keyframe_marginal(robot, index) + np.diag(pending)
 
     def _keyframe_marginal(self, robot: _Robot, index: int) -> np.ndarray:
-        """6x6 marginal of the robot's optimised keyframe ``index``, or a bound on it.
+        """3x3 marginal of the robot's optimised keyframe ``index``, or a bound on it.
 
         An iSAM2 marginal costs more as the graph grows, and association wants one in
         every frame. Within ``association_covariance_reuse_keyframes`` keyframes of the
@@ -476,12 +470,12 @@ class SlamBackend:
     def latest_pose(self, robot_id: int) -> np.ndarray:
         """``[x, y, theta]``: the latest keyframe's estimate composed with the odometry since."""
         robot = self._robots[robot_id]
-        return compose(pose3_to_planar(self.pose_estimate(robot.pose_keys[-1])), robot.offset)
+        return compose(pose2_to_planar(self.pose_estimate(robot.pose_keys[-1])), robot.offset)
 
     def latest_covariance(self, robot_id: int) -> np.ndarray:
         """World-frame 3x3 covariance of :meth:`latest_pose` (keyframe marginal + offset)."""
         robot = self._robots[robot_id]
-        keyframe = pose3_to_planar(self.pose_estimate(robot.pose_keys[-1]))
+        keyframe = pose2_to_planar(self.pose_estimate(robot.pose_keys[-1]))
         cov = _planar_covariance(self.pose_covariance(robot), keyframe[2])
         ja, jb = planar_compose_jacobians(keyframe, robot.offset)
         return ja @ cov @ ja.T + jb @ self.offset_covariance(robot) @ jb.T
@@ -493,7 +487,7 @@ class SlamBackend:
     def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
         """Keyframe stamps (N,) and optimised ``[x, y, theta]`` poses (N, 3) of one robot."""
         robot = self._robots[robot_id]
-        poses = np.array([pose3_to_planar(self.pose_estimate(k)) for k in robot.pose_keys])
+        poses = np.array([pose2_to_planar(self.pose_estimate(k)) for k in robot.pose_keys])
         return np.array(robot.stamps), poses
 
     def moved_keyframes(self) -> list[tuple[int, int]]:

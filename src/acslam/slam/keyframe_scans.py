@@ -12,7 +12,7 @@ import numpy as np
 from acslam.geometry import between, compose
 from acslam.messages import LidarScan
 from acslam.slam import keys
-from acslam.slam.factors import planar_to_pose3, pose3_to_planar
+from acslam.slam.factors import planar_to_pose2, pose2_to_planar, rotation_about_z
 
 if TYPE_CHECKING:
     from acslam.slam.backend import SlamBackend
@@ -74,7 +74,7 @@ class KeyframeScans:
     def pose(self, index: int) -> np.ndarray:
         """Current world pose ``[x, y, theta]`` of stored scan ``index``."""
         _, key, offset = self._scans[index]
-        return compose(pose3_to_planar(self.backend.pose_estimate(key)), offset)
+        return compose(pose2_to_planar(self.backend.pose_estimate(key)), offset)
 
     def positions(self, indices: np.ndarray) -> np.ndarray:
         """(k, 2) current world positions of many stored scans at once: :meth:`pose`'s
@@ -126,17 +126,13 @@ class KeyframeScans:
         _, key_a, offset_a = self._scans[index_a]
         _, key_b, offset_b = self._scans[index_b]
         between_keyframes = compose(compose(offset_a, relative), inverse(offset_b))
-        c, s = np.cos(offset_a[2]), np.sin(offset_a[2])
-        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        rotation = rotation_about_z(offset_a[2])
         planar = rotation @ np.asarray(covariance, dtype=float) @ rotation.T
-        full = np.diag(np.full(6, config.planar_sigma**2))
-        order = [3, 4, 2]  # GTSAM Pose3 tangent: rotation (roll, pitch, yaw), then x, y, z
-        full[np.ix_(order, order)] = planar
-        noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Covariance(full)
+        noise: gtsam.noiseModel.Base = gtsam.noiseModel.Gaussian.Covariance(planar)
         if robust:
             noise = gtsam.noiseModel.Robust.Create(
                 gtsam.noiseModel.mEstimator.Huber.Create(config.huber_k), noise
             )
         self.backend.add_factor(
-            gtsam.BetweenFactorPose3(key_a, key_b, planar_to_pose3(between_keyframes), noise)
+            gtsam.BetweenFactorPose2(key_a, key_b, planar_to_pose2(between_keyframes), noise)
         )

@@ -31,7 +31,10 @@ from acslam.slam.association import (
 from acslam.slam.factors import (
     observation_factor,
     observation_noise,
+    point_to_body,
+    point_to_world,
     robot_observation_factor,
+    rotation_about_z,
     sensor_covariance,
 )
 
@@ -95,8 +98,7 @@ def to_keyframe(
     """A point seen now -> the robot's latest keyframe frame, with its covariance: the
     sensor's, rotated by the offset's heading, plus the offset's odometry uncertainty."""
     offset = robot.offset
-    c, s = np.cos(offset[2]), np.sin(offset[2])
-    offset_rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    offset_rot = rotation_about_z(offset[2])
     rotated = offset_rot @ point
     point_kf = rotated + np.array([offset[0], offset[1], 0.0])
     jac_offset = np.array([[1.0, 0.0, -rotated[1]], [0.0, 1.0, rotated[0]], [0.0, 0.0, 0.0]])
@@ -200,7 +202,7 @@ class LandmarkAssociation:
         backend = self.backend
         pose_key = robot.pose_keys[-1]
         pose = backend.pose_estimate(pose_key)
-        rotation = pose.rotation().matrix()
+        rotation = rotation_about_z(pose.theta())
         pose_cov = backend.pose_covariance(robot)
         offset_cov = backend.offset_covariance(robot)
         frame = _Frame(pose_key, descriptors)
@@ -208,7 +210,7 @@ class LandmarkAssociation:
             point_kf, cov_kf = to_keyframe(self.config, robot, point, offset_cov)
             frame.kf.append(point_kf)
             frame.cov_kf.append(cov_kf)
-            frame.world.append(np.asarray(pose.transformFrom(point_kf)))
+            frame.world.append(point_to_world(pose, point_kf))
             frame.sensor.append(rotation @ cov_kf @ rotation.T)
             frame.cov.append(measurement_covariance(rotation, point_kf, cov_kf, pose_cov))
         return frame
@@ -293,7 +295,7 @@ class LandmarkAssociation:
         if not n_cols:
             return scores
         ref_key, ref_pose, ref_cov = backend.reference(robot)
-        ref_rot = ref_pose.rotation().matrix()
+        ref_rot = rotation_about_z(ref_pose.theta())
         now_index = len(robot.pose_keys) - 1
         reused = self._reusable(robot.robot_id, confirmed, now_index)
         max_age_updates = self.config.association_joint_marginal_max_age_updates
@@ -313,10 +315,10 @@ class LandmarkAssociation:
         for t in tentatives:
             key, z_kf, cov_kf = t.observations[-1]
             pose = backend.pose_estimate(key)
-            rot = pose.rotation().matrix()
-            tent_geometry.append((np.asarray(pose.transformFrom(z_kf)), rot @ cov_kf @ rot.T))
+            rot = rotation_about_z(pose.theta())
+            tent_geometry.append((point_to_world(pose, z_kf), rot @ cov_kf @ rot.T))
         for n in range(len(world)):
-            lever = pose_lever_jacobian(ref_rot, np.asarray(ref_pose.transformTo(world[n])))
+            lever = pose_lever_jacobian(ref_rot, point_to_body(ref_pose, world[n])[0])
             rho2 = float(frame.kf[n][:2] @ frame.kf[n][:2])
             for i in alike(self.config, frame, n, per_point[n], self._descriptors):
                 if i in reused:
@@ -360,7 +362,7 @@ class LandmarkAssociation:
             relative = self._relative.get((robot_id, i))
             if relative is None or now_index - relative.kf_index >= reuse:
                 continue
-            rotation = self.backend.pose_estimate(relative.pose_key).rotation().matrix()
+            rotation = rotation_about_z(self.backend.pose_estimate(relative.pose_key).theta())
             found[i] = (relative.kf_index, rotation @ relative.covariance @ rotation.T)
         return found
 
@@ -368,23 +370,21 @@ class LandmarkAssociation:
         self,
         robot_id: int,
         ref_key: int,
-        ref_pose: gtsam.Pose3,
+        ref_pose: gtsam.Pose2,
         pose_block: np.ndarray,
         landmarks: list[int],
         lm_covs: list[np.ndarray],
         cross: list[np.ndarray | None],
     ) -> None:
         """Keep each landmark's covariance in the frame of the reference keyframe, from the
-        joint marginal of both: J [[P, C], [C^T, L]] J^T with J the Jacobians of
-        Pose3.transformTo."""
+        joint marginal of both: J [[P, C], [C^T, L]] J^T with J the Jacobians of the
+        point in the keyframe's frame (:func:`point_to_body`)."""
         kf_index = keys.decode_pose_key(ref_key)[1]
         positions = self.backend.landmark_positions
         for i, lm_cov, pose_lm in zip(landmarks, lm_covs, cross, strict=True):
             if pose_lm is None:
                 continue
-            h_pose = np.zeros((3, 6), order="F")
-            h_point = np.zeros((3, 3), order="F")
-            ref_pose.transformTo(positions[i], h_pose, h_point)
+            _, h_pose, h_point = point_to_body(ref_pose, positions[i])
             jac = np.hstack([h_pose, h_point])
             cov = jac @ np.block([[pose_block, pose_lm], [pose_lm.T, lm_cov]]) @ jac.T
             self._relative[(robot_id, i)] = _Relative(kf_index, ref_key, 0.5 * (cov + cov.T))
