@@ -309,6 +309,15 @@ class SlamConfig(StageParams):
     huber_k: PositiveFloat = 2.8
     keyframe_distance_m: PositiveFloat = 0.3
     keyframe_angle_rad: PositiveFloat = 0.3
+    # Where a robot drives through space its team already keyframed (a keyframe within
+    # mapped_space_radius_m: another robot's, or its own from mapped_space_min_path_m or
+    # more back along its path), it opens a keyframe only every mapped_keyframe_distance_m
+    # of path (turns still open one every keyframe_angle_rad): the graph grows with the
+    # mapped area, not with every pass (acslam.slam.keyframe_coverage). At most
+    # keyframe_distance_m: off.
+    mapped_keyframe_distance_m: NonNegativeFloat = 1.5
+    mapped_space_radius_m: PositiveFloat = 0.5
+    mapped_space_min_path_m: PositiveFloat = 5.0
     association_gate_m: PositiveFloat = 1.0
     association_mahalanobis_gate: PositiveFloat = 11.34
     association_min_likelihood: NonNegativeFloat = 0.01

@@ -82,7 +82,12 @@ def measure_isam2_updates(keyframes: int, robots: int, seed: int) -> dict:
         ]
     )
     landmarks = _landmark_grid(centers)
-    config = SlamConfig(landmark_sigma_m=POINT_SIGMA_M, keyframe_distance_m=0.5 * STEP_M)
+    # Every step opens a keyframe, on each lap too: the graph holds ``keyframes`` poses.
+    config = SlamConfig(
+        landmark_sigma_m=POINT_SIGMA_M,
+        keyframe_distance_m=0.5 * STEP_M,
+        mapped_keyframe_distance_m=0.0,
+    )
     angles = rng.uniform(0.0, 2 * math.pi, robots)
     truth = [_circle_pose(centers[r], angles[r]) for r in range(robots)]
     backend = SlamBackend(config, {r: truth[r].copy() for r in range(robots)})

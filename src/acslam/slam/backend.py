@@ -8,7 +8,9 @@ when one robot sees another.
 
 Keyframes: a robot gets a new pose variable only when the odometry accumulated since its
 last keyframe exceeds ``keyframe_distance_m`` of path or ``keyframe_angle_rad`` of turn,
-so the graph grows with distance travelled, not with time. Landmark observations and
+so the graph grows with distance travelled, not with time; where its team already has
+keyframes, only every ``mapped_keyframe_distance_m`` (:mod:`acslam.slam.keyframe_coverage`),
+so it grows with the mapped area rather than with every pass. Landmark observations and
 LiDAR scans made between keyframes attach to the robot's *latest* keyframe (the nearest
 one that exists when they arrive; a later keyframe is not known yet) through the
 odometry offset since it: an observation z becomes z_kf = offset * z in the keyframe
@@ -43,6 +45,7 @@ from acslam.slam.factors import (
     prior_noise,
     rotation_about_z,
 )
+from acslam.slam.keyframe_coverage import KeyframeCoverage
 from acslam.slam.keyframe_scans import KeyframeScans
 from acslam.slam.landmark_association import LandmarkAssociation, chain_variance
 from acslam.slam.odometry_calibration import OdometryCalibration
@@ -117,6 +120,9 @@ class SlamBackend:
         self.update_durations_s: list[float] = []
         self.association = LandmarkAssociation(self)
         self.scans = KeyframeScans(self)
+        self._coverage = KeyframeCoverage(
+            config.mapped_space_radius_m, config.mapped_space_min_path_m
+        )
         for robot_id, start in starts.items():
             start = np.asarray(start, dtype=float)
             key = keys.pose_key(int(robot_id), 0)
@@ -128,6 +134,7 @@ class SlamBackend:
                 gtsam.PriorFactorPose2(key, planar_to_pose2(start), prior_noise(config))
             )
             self._initial.insert(key, planar_to_pose2(start))
+            self._coverage.add(int(robot_id), float(start[0]), float(start[1]), 0.0)
 
     # ------------------------------------------------------------------ input
 
@@ -158,8 +165,19 @@ class SlamBackend:
         robot.distance_m += float(np.hypot(msg.dx, msg.dy))
         robot.angle_rad += abs(msg.dtheta)
         cfg = self.config
-        if robot.distance_m >= cfg.keyframe_distance_m or robot.angle_rad >= cfg.keyframe_angle_rad:
+        if robot.angle_rad >= cfg.keyframe_angle_rad or (
+            robot.distance_m >= cfg.keyframe_distance_m and not self._in_mapped_space(robot)
+        ):
             self._new_keyframe(robot, msg.stamp)
+
+    def _in_mapped_space(self, robot: _Robot) -> bool:
+        """Whether the robot may drive on to ``mapped_keyframe_distance_m`` before its
+        next keyframe: it is short of that, and its team already keyframed where it is."""
+        if robot.distance_m >= self.config.mapped_keyframe_distance_m:
+            return False
+        x_m, y_m, _ = self.latest_pose(robot.robot_id)
+        path_m = robot.cum_distance_m[-1] + robot.distance_m
+        return self._coverage.covers(robot.robot_id, x_m, y_m, path_m)
 
     def _new_keyframe(self, robot: _Robot, stamp: float) -> None:
         previous = robot.pose_keys[-1]
@@ -167,12 +185,14 @@ class SlamBackend:
         relative = planar_to_pose2(robot.offset)
         noise = odometry_noise(self.config, robot.distance_m, robot.angle_rad)
         self._graph.add(gtsam.BetweenFactorPose2(previous, key, relative, noise))
-        self._initial.insert(key, self.pose_estimate(previous).compose(relative))
+        pose = self.pose_estimate(previous).compose(relative)
+        self._initial.insert(key, pose)
         self._odometry_variances[key] = np.asarray(noise.sigmas()) ** 2
         sigmas = np.asarray(noise.sigmas())
         robot.cum_var_xy.append(robot.cum_var_xy[-1] + sigmas[0] ** 2)
         robot.cum_var_theta.append(robot.cum_var_theta[-1] + sigmas[2] ** 2)
         robot.cum_distance_m.append(robot.cum_distance_m[-1] + robot.distance_m)
+        self._coverage.add(robot.robot_id, pose.x(), pose.y(), robot.cum_distance_m[-1])
         robot.pose_keys.append(key)
         robot.stamps.append(stamp)
         robot.offset = np.zeros(3)
