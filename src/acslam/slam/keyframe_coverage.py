@@ -8,8 +8,8 @@ would follow the trajectory's length rather than the mapped area (Cartographer's
 localisation and slam_toolbox's node spacing keep their graphs bounded the same way).
 
 A keyframe is kept at the position of its first estimate. SLAM later moves it by
-centimetres, rarely by more than a few decimetres, which only shifts where spacing
-changes, never what enters the graph; so nothing here follows corrections.
+centimetres, rarely by more than a few decimetres, which shifts where the spacing
+changes by as much and nothing else; so nothing here follows corrections.
 """
 
 from __future__ import annotations
