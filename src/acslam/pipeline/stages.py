@@ -198,7 +198,8 @@ class Allocator(Protocol):
 
 @runtime_checkable
 class GlobalPlanner(Protocol):
-    """A path for one robot on the costmap. No context."""
+    """A path for one robot on the costmap. No context. The server plans the robots'
+    paths side by side on threads, so ``plan`` must not change shared state."""
 
     def plan(self, cost: Grid, lethal: Grid, spec: GridSpec, start_xy_m: Xy, goal_xy_m: Xy) -> Xys:
         """(M, 2) waypoints after the start, ending at the goal; raises
