@@ -4,10 +4,12 @@ store keeps exactly what the map gets."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from acslam.config import ScanMatchingConfig, SlamConfig
 from acslam.messages import LidarScan
 from acslam.pipeline.perception import Perception
+from acslam.slam.lidar_constraints import LidarConstraints
 from acslam.slam.localizer import Isam2Localizer
 
 
@@ -46,3 +48,27 @@ def test_the_beams_dropped_for_teammates_become_blind_sectors() -> None:
         kept.blind_sectors, [[-0.15, 0.15, 1.9], [1.45, 1.65, 1.45]], atol=1e-12
     )
     assert len(kept.mappable.ranges) == 22 - 5 - 1
+
+
+def test_while_loop_pairs_wait_every_cycle_sends_a_job_without_searching(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Searches come every 0.5 s (cycles 3, 8, ...); while found pairs wait to be matched,
+    every cycle sends a job for them, without a search; once none wait the period alone
+    decides again."""
+    starts = {0: np.zeros(3)}
+    localizer = Isam2Localizer(SlamConfig(), scan_matching=ScanMatchingConfig(), starts=starts)
+    perception = Perception(localizer, starts, robot_reach_m=0.25, loop_search_period_s=0.5)
+    waiting = {"pairs": 0}
+    monkeypatch.setattr(LidarConstraints, "loops_waiting", property(lambda _: waiting["pairs"]))
+    jobs = []
+
+    def loop_matches(slam, search=True, bounded=True):
+        jobs.append((cycle, search))
+        waiting["pairs"] = {3: 2, 4: 1}.get(cycle, 0)  # what the jobs of cycles 3 and 4 leave
+        return lambda: []
+
+    localizer.scan_matcher.loop_matches = loop_matches
+    for cycle in range(14):
+        perception.localize([], now_s=cycle * 0.1)
+    assert jobs == [(3, True), (4, False), (5, False), (8, True), (13, True)]

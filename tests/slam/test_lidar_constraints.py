@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -123,10 +124,9 @@ def _exhaustive_order(lidar: LidarConstraints, slam: SlamBackend) -> list[tuple[
     return reference.search(np.array([slam.scans.pose(e.scan_index)[:2] for e in entries]))
 
 
-def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> None:
-    """Two robots drive laps round a 4 m x 3 m room with biased odometry; at every search
-    the pairs tried, and their order, are exactly those of the exhaustive search at the
-    scans' current poses, and the scans' vectorised positions match their poses."""
+def _laps(lidar: LidarConstraints, search: Callable[[SlamBackend], None]) -> SlamBackend:
+    """Two robots drive laps round a 4 m x 3 m room with biased odometry (16 m each: two
+    laps and a half), calling ``search`` every fourth step, before the update."""
     occupied = np.zeros((60, 80), dtype=bool)  # 4 m x 3 m at 5 cm, walls all round
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True
     occupied[25:35, 35:45] = True  # a pillar in the middle
@@ -136,18 +136,8 @@ def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> N
     starts = {r: np.array([2.0 + radius_m * np.cos(a), 1.5 + radius_m * np.sin(a), a + np.pi / 2])
               for r, a in ((0, 0.0), (1, np.pi))}  # fmt: skip
     slam = SlamBackend(SlamConfig(keyframe_distance_m=0.3), starts)
-    lidar = LidarConstraints(ScanMatchingConfig(loop_min_separation_s=10.0))
-    tried: list[tuple[int, int]] = []
-    expected: list[tuple[int, int]] = []
-    match_loop = lidar._match_loop
-
-    def record(a, b, guess, limit_m):
-        tried.append((lidar._entries.index(a), lidar._entries.index(b)))
-        return match_loop(a, b, guess, limit_m)
-
-    lidar._match_loop = record
     step_rad = 0.1 / radius_m
-    for k in range(160):  # 16 m: two laps and a half each
+    for k in range(160):
         stamp = k * 0.25
         for r, start in starts.items():
             angle = np.arctan2(start[1] - centre[1], start[0] - centre[0]) + k * step_rad
@@ -165,16 +155,72 @@ def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> N
             if index is not None:
                 lidar.add_scan(slam, index, scan)
         if k % 4 == 3:
-            indices = np.array([e.scan_index for e in lidar._entries])
-            poses = np.array([slam.scans.pose(i) for i in indices])
-            np.testing.assert_allclose(
-                slam.scans.positions(indices), poses[:, :2], rtol=0, atol=1e-12
-            )
-            expected.extend(_exhaustive_order(lidar, slam))
-            lidar.close_loops(slam)
+            search(slam)
         slam.update()
+    return slam
+
+
+def _recording(lidar: LidarConstraints) -> list[tuple[int, int]]:
+    """The pairs ``lidar`` matches from now on, as entry indices, in order."""
+    tried: list[tuple[int, int]] = []
+    match_loop = lidar._match_loop
+
+    def record(a, b, guess, limit_m):
+        tried.append((lidar._entries.index(a), lidar._entries.index(b)))
+        return match_loop(a, b, guess, limit_m)
+
+    lidar._match_loop = record
+    return tried
+
+
+def test_loop_closure_search_tries_what_a_search_over_all_keyframes_would() -> None:
+    """At every search the pairs tried, and their order, are exactly those of the
+    exhaustive search at the scans' current poses, and the scans' vectorised positions
+    match their poses."""
+    lidar = LidarConstraints(ScanMatchingConfig(loop_min_separation_s=10.0))
+    tried = _recording(lidar)
+    expected: list[tuple[int, int]] = []
+
+    def search(slam: SlamBackend) -> None:
+        indices = np.array([e.scan_index for e in lidar._entries])
+        poses = np.array([slam.scans.pose(i) for i in indices])
+        np.testing.assert_allclose(slam.scans.positions(indices), poses[:, :2], rtol=0, atol=1e-12)
+        expected.extend(_exhaustive_order(lidar, slam))
+        lidar.close_loops(slam)
+
+    _laps(lidar, search)
     assert tried == expected
     assert len(tried) > 30
+    assert lidar.loops_added > 5
+
+
+def test_bounded_loop_jobs_match_what_an_unbounded_search_would_only_later() -> None:
+    """With loop_matches_per_cycle = 3, a job matches at most 3 pairs, the first queued;
+    jobs between searches match what waits. The pairs tried, in order, are those of the
+    exhaustive search at every search; closing the loops at the end tries the rest."""
+    lidar = LidarConstraints(
+        ScanMatchingConfig(loop_min_separation_s=10.0, loop_matches_per_cycle=3)
+    )
+    tried = _recording(lidar)
+    expected: list[tuple[int, int]] = []
+    waited = []
+
+    def search(slam: SlamBackend) -> None:
+        expected.extend(_exhaustive_order(lidar, slam))
+        for searching in (True, False, False):  # a search, then two cycles without one
+            before = len(tried)
+            lidar.add_loops(slam, lidar.loop_matches(slam, search=searching)())
+            assert len(tried) - before == min(3, len(expected) - before)
+            assert lidar.loops_waiting == len(expected) - len(tried)
+            waited.append(lidar.loops_waiting)
+
+    slam = _laps(lidar, search)
+    assert max(waited) > 0
+    assert tried == expected[: len(tried)]
+    expected.extend(_exhaustive_order(lidar, slam))
+    lidar.close_loops(slam)
+    assert tried == expected
+    assert lidar.loops_waiting == 0
     assert lidar.loops_added > 5
 
 

@@ -28,6 +28,7 @@ odometry.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -92,6 +93,8 @@ class LidarConstraints:
             config.loop_radius_m, config.loop_min_separation_s, MAX_LOOP_ATTEMPTS
         )
         self._scan_indices = np.zeros(64, dtype=np.intp)  # per entry, with spare rows
+        # Loop-closure pairs found and not yet matched: (a, b, guess, max correction).
+        self._queued: deque[tuple[_KeyframeScan, _KeyframeScan, np.ndarray, float]] = deque()
         self._last_baseline: dict[int, int] = {}  # robot -> keyframe last used as a baseline
         # robot -> keyframe -> its accepted match to the previous keyframe, kept back to
         # the last baseline: the chain a baseline match is checked against.
@@ -220,37 +223,57 @@ class LidarConstraints:
         return None
 
     def close_loops(self, slam: SlamBackend) -> int:
-        """Search, match and add loop closures at once (:meth:`loop_matches`, then
-        :meth:`add_loops`); returns how many closures were added."""
-        return self.add_loops(slam, self.loop_matches(slam)())
+        """Search, then match and add every loop closure queued, at once
+        (:meth:`loop_matches` without the per-job bound, then :meth:`add_loops`); returns
+        how many closures were added."""
+        return self.add_loops(slam, self.loop_matches(slam, search=True, bounded=False)())
 
-    def loop_matches(self, slam: SlamBackend) -> Callable[[], list[LoopMatch]]:
-        """Not yet tried pairs of keyframes close in space, nearest first and at most
-        ``MAX_LOOP_ATTEMPTS`` per keyframe, as a job that matches them: it reads only the
-        keyframes' prepared scans and the guesses taken now, so it may run beside the
-        control loop while the graph goes on (the closures enter it when
+    def loop_matches(
+        self, slam: SlamBackend, search: bool = True, bounded: bool = True
+    ) -> Callable[[], list[LoopMatch]]:
+        """A job that matches queued pairs of keyframes: it reads only the keyframes'
+        prepared scans and the guesses taken when the pairs were found, so it may run
+        beside the control loop while the graph goes on (the closures enter it when
         :meth:`add_loops` takes them).
 
+        ``search``: first queue the pairs not yet tried of keyframes close in space,
+        nearest first and at most ``MAX_LOOP_ATTEMPTS`` per keyframe, with their guesses.
         The cap is ours: a robot that passes a place many times (or turns on the spot)
         has dozens of candidates per keyframe, and matching them all costs far more than
         the few closures each keyframe needs. The pairs are those of a search over all
         keyframes at their current poses, found in time that follows what moved and what
         is near (:mod:`acslam.slam.loop_candidates`).
+
+        ``bounded``: the job matches at most ``loop_matches_per_cycle`` pairs (when set),
+        the first queued; the rest wait for the next job (:attr:`loops_waiting`). The
+        search chooses the same pairs either way: the bound only spreads their matching
+        over more jobs.
         """
-        pairs = self._candidates.search(
-            slam.scans.positions(self._scan_indices[: len(self._entries)]),
-            lambda k: slam.scans.pose(self._entries[k].scan_index)[:2],
-        )
-        tries = []
-        for earlier, later in pairs:
-            a, b = self._entries[earlier], self._entries[later]
-            guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
-            way_m = a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
-            tries.append((a, b, guess, max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)))
+        if search:
+            pairs = self._candidates.search(
+                slam.scans.positions(self._scan_indices[: len(self._entries)]),
+                lambda k: slam.scans.pose(self._entries[k].scan_index)[:2],
+            )
+            for earlier, later in pairs:
+                a, b = self._entries[earlier], self._entries[later]
+                guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
+                way_m = (
+                    a.path_m + b.path_m if a.robot_id != b.robot_id else abs(b.path_m - a.path_m)
+                )
+                limit_m = max(self.config.max_correction_m, LOOP_DRIFT_PER_M * way_m)
+                self._queued.append((a, b, guess, limit_m))
+        per_job = self.config.loop_matches_per_cycle
+        count = per_job if bounded and per_job > 0 else len(self._queued)
+        tries = [self._queued.popleft() for _ in range(min(count, len(self._queued)))]
         return lambda: [
             LoopMatch(a, b, self._match_loop(a, b, guess, limit_m))
             for a, b, guess, limit_m in tries
         ]
+
+    @property
+    def loops_waiting(self) -> int:
+        """Loop-closure pairs found and not yet handed to a job (:meth:`loop_matches`)."""
+        return len(self._queued)
 
     def add_loops(self, slam: SlamBackend, matches: list[LoopMatch]) -> int:
         """Add the verified loop closures of a :meth:`loop_matches` job to the graph;

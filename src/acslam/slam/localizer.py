@@ -66,9 +66,13 @@ class Isam2Localizer:
         self.scan_matcher.add_scan(self.backend, index, scan, blind_sectors)
 
     def optimize(self, close_loops: bool) -> None:
-        if close_loops and self._loop_job is None:
+        """Update the graph; searches for loop closures when asked. A job matches at most
+        ``loop_matches_per_cycle`` of the pairs found; while some wait, every cycle sends
+        the next of them, so a burst is spread over the next cycles."""
+        matcher = self.scan_matcher
+        if (close_loops or matcher.loops_waiting > 0) and self._loop_job is None:
             self._loop_job = self._jobs.submit(
-                LOOP_LANE, self.scan_matcher.loop_matches(self.backend)
+                LOOP_LANE, matcher.loop_matches(self.backend, search=close_loops)
             )
         closures = 0
         if self._loop_job is not None and self._loop_job.done():
