@@ -4,12 +4,9 @@ record their calls, and a costmap whose capped distances change no local plan.""
 from __future__ import annotations
 
 import math
-import threading
-import time
 from collections.abc import Iterator
 from typing import ClassVar, Literal
 
-import numba
 import numpy as np
 import pytest
 
@@ -19,7 +16,7 @@ from acslam.mapping.costmap import compute_costmap
 from acslam.mapping.occupancy import TeamMap
 from acslam.messages import LidarScan
 from acslam.pipeline.registry import LOCAL_PLANNERS, LOCALIZERS, MAPPERS
-from acslam.pipeline.server import Server, costmap_reach_m, in_lanes
+from acslam.pipeline.server import Server, costmap_reach_m
 from acslam.planning.field import DistanceField, RobotState
 from acslam.slam.localizer import Isam2Localizer
 
@@ -157,22 +154,3 @@ def test_the_costmap_reach_changes_no_local_plan(planner_name: str) -> None:
     assert capped == uncapped
     too_short_m = config.algorithms.planning.obstacle_influence_m / 2
     assert _team_commands(field(too_short_m), free, planner_name, config) != uncapped
-
-
-@pytest.mark.parametrize("threads", [1, 2])
-def test_work_in_lanes_comes_back_in_order_from_as_many_threads_as_numba_has(
-    threads: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """Six pieces of work, each 20 ms asleep: every result in order, run on ``threads``
-    threads (one: the caller's)."""
-    monkeypatch.setattr(numba.config, "NUMBA_NUM_THREADS", threads)
-    workers: set[int] = set()
-
-    def work(k: int) -> int:
-        workers.add(threading.get_ident())
-        time.sleep(0.02)
-        return k * k
-
-    assert in_lanes(work, 6) == [0, 1, 4, 9, 16, 25]
-    assert len(workers) == threads
-    assert (threading.get_ident() in workers) == (threads == 1)

@@ -29,15 +29,14 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from contextlib import contextmanager
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import TypeVar
 
-import numba
 import numpy as np
 
+from acslam import threads
 from acslam.config import ScenarioConfig
 from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
@@ -63,7 +62,6 @@ from acslam.planning.recovery import Recovery, penalize
 from acslam.schedule import Periodic, is_due
 
 TEAM_FRAME = "map"
-T = TypeVar("T")
 MAP_LANE = "map"
 """Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
 DECISION_LANE = "decisions"
@@ -438,7 +436,7 @@ class Server:
             target = None if choice is None else clusters[choice]
             return self._plan(tasks[i], target, poses[i, :2], costmap, window, choice != current[k])
 
-        plans = dict(zip(active, in_lanes(plan, len(active)), strict=True))
+        plans = dict(zip(active, threads.mapped(plan, len(active)), strict=True))
         idle: dict[int, float | None] = {}
         for i in active:
             if plans[i].path_m is not None:
@@ -580,15 +578,3 @@ class Server:
         for i, task in enumerate(self._tasks):
             task.velocity = commands[i]
         return commands
-
-
-def in_lanes(work: Callable[[int], T], count: int) -> list[T]:
-    """``[work(0), ..., work(count - 1)]``, side by side on up to ``NUMBA_NUM_THREADS``
-    threads (numba's thread count, by default the machine's cores): the robots' global
-    searches release the GIL, and ten long ones at the end of a building's exploration
-    took 150 ms one after the other. The results do not depend on the threads."""
-    lanes = max(1, min(numba.config.NUMBA_NUM_THREADS, count))
-    if lanes == 1:
-        return [work(k) for k in range(count)]
-    with ThreadPoolExecutor(lanes) as pool:
-        return list(pool.map(work, range(count)))

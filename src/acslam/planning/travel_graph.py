@@ -32,13 +32,13 @@ with single short paths up to 19 % off.
 from __future__ import annotations
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 
 import numba
 import numpy as np
 
+from acslam import threads
 from acslam.planning.astar import grid_search, step_factor
 
 
@@ -571,11 +571,8 @@ def _distances_to_legs(
     :func:`_search` per start, from its box nodes ``seeds[seed_offsets[i]:seed_offsets[i +
     1]]`` at their fine costs ``seed_costs``.
 
-    The searches are independent: they run in lanes, one per thread up to
-    ``NUMBA_NUM_THREADS`` (numba's thread count, by default the machine's cores). Python
-    threads that wait asleep rather than numba's parallel loops, whose OpenMP workers spin
-    between loops and so slow everything else where the cores are shared. The result does
-    not depend on the lanes."""
+    The searches are independent: they run side by side (:func:`acslam.threads.striped`),
+    each thread with one workspace. The result does not depend on the thread count."""
     searches = len(seed_offsets) - 1
     result = np.full((searches, len(leg_nodes)), np.inf)
     finite_seeds = seed_costs[np.isfinite(seed_costs)]
@@ -591,20 +588,12 @@ def _distances_to_legs(
         buckets *= 2
     is_leg = np.zeros(graph.node_count, dtype=np.bool_)
     is_leg[leg_nodes] = True
-    lanes = max(1, min(numba.config.NUMBA_NUM_THREADS, searches))
     search = partial(
         _lane_searches, graph.offsets, graph.neighbours, costs, seed_offsets, seeds,
         seed_costs, is_leg, leg_nodes, per_width, buckets,
     )  # fmt: skip
     # Positional arguments only: called with keywords, the lanes ran no faster than one.
-    if lanes == 1:
-        search(0, 1, result)
-        return result
-    with ThreadPoolExecutor(lanes - 1) as pool:
-        others = [pool.submit(search, lane, lanes, result) for lane in range(1, lanes)]
-        search(0, lanes, result)
-        for lane in others:
-            lane.result()
+    threads.striped(lambda first, step: search(first, step, result), searches)
     return result
 
 
