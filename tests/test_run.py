@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from acslam.cli import cli
 from acslam.config import builtin_scenario_names
-from acslam.eval.report import rebuild_report
+from acslam.eval.report import RunRecord, rebuild_report
 from acslam.runner import run_exploration
 from acslam.scenario import load_scenario
 
@@ -30,6 +30,7 @@ METRIC_KEYS = {
     "real_time_factor",
     "timing",
     "localization",
+    "online_localization",
     "team_alignment",
     "coverage",
     "mapping",
@@ -73,6 +74,20 @@ def test_small_team_explores_thesis_exp1(tmp_path: Path, robots: int) -> None:
         steps_m = [float(np.hypot(*(b - a))) for a, b in pairwise(true_xy)]
         assert waste["travelled_m"][name] == pytest.approx(sum(steps_m), rel=1e-6)
     assert waste["travelled_from"] == "ground truth"
+    # The pose the server drove by, at every control step, against the truth there.
+    record = RunRecord.load(tmp_path / "run.npz")
+    for name, online, true in zip(
+        names, record.online_trajectories, record.true_trajectories, strict=True
+    ):
+        assert len(online) == round(metrics["sim_time_s"] / 0.1) + 1
+        gaps_m = np.hypot(
+            online[:, 1] - np.interp(online[:, 0], true[:, 0], true[:, 1]),
+            online[:, 2] - np.interp(online[:, 0], true[:, 0], true[:, 2]),
+        )
+        errors = metrics["online_localization"][name]
+        assert errors["max_m"] == pytest.approx(gaps_m.max(), rel=1e-9)
+        assert errors["rmse_m"] == pytest.approx(np.sqrt(np.mean(gaps_m**2)), rel=1e-9)
+        assert 0.0 < errors["max_m"] < 0.5
     assert (waste["overlap_ratio"] == 0.0) if robots == 1 else (0.0 < waste["overlap_ratio"] < 1.0)
     for path in (
         "config.yaml",

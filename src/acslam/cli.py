@@ -624,6 +624,16 @@ def print_run_summary(metrics: dict) -> None:
         from acslam.eval.report import team_alignment_text
 
         _console.print(team_alignment_text(metrics["team_alignment"]), markup=False, soft_wrap=True)
+    online = metrics["online_localization"]
+    if online:
+        worst = max(online, key=lambda name: online[name]["max_m"])
+        _console.print(
+            "The pose each robot was driven by, at every step before later corrections: "
+            f"position RMSE {max(m['rmse_m'] for m in online.values()):.3f} m at worst, "
+            f"largest error {online[worst]['max_m']:.3f} m ({worst}).",
+            markup=False,
+            soft_wrap=True,
+        )
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     travelled_m = metrics["waste"]["travelled_m"]
     _console.print(

@@ -173,7 +173,8 @@ def failure_reason(exc: Exception, out_dir: Path) -> str:
 @dataclass
 class RunLog:
     """What a run keeps of the server's snapshots: the latest one, every stage's timings
-    (``[simulated time, wall seconds]`` each time it ran), and the explored area once per
+    (``[simulated time, wall seconds]`` each time it ran), every robot's pose as the
+    server used it at each step (``[time, x, y, theta]``), and the explored area once per
     simulated second (reported as progress)."""
 
     spec: GridSpec
@@ -183,6 +184,7 @@ class RunLog:
         default_factory=lambda: defaultdict(list)
     )
     explored_history: list[tuple[float, float]] = field(default_factory=list)
+    online_poses: list[np.ndarray] = field(default_factory=list)
     at_explored: Snapshot | None = None
     """The snapshot of the step the team had nothing left to explore (before a patrol)."""
     _next_sample_s: float = 0.0
@@ -193,6 +195,8 @@ class RunLog:
             self.at_explored = snapshot
         for stage, seconds in snapshot.timings_s.items():
             self.timings_s[stage].append((snapshot.time_s, seconds))
+        poses = np.asarray(snapshot.poses, dtype=float)
+        self.online_poses.append(np.column_stack([np.full(len(poses), snapshot.time_s), poses]))
 
     def sample_explored(self, time_s: float) -> None:
         if time_s < self._next_sample_s:
@@ -261,6 +265,9 @@ def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
         stage_names=np.array(list(log.timings_s), dtype=str),
         stage_timings=[np.array(samples).reshape(-1, 2) for samples in log.timings_s.values()],
         control_period_s=scenario.config.algorithms.planning.control_period_s,
+        online_trajectories=list(np.stack(log.online_poses, axis=1))
+        if log.online_poses
+        else [np.zeros((0, 4)) for _ in range(count)],
     )
 
 
@@ -295,15 +302,21 @@ def _metrics(
         explored.lost,
         time_s,
     )
-    localization = {}
+    localization, online_localization = {}, {}
     scored = []
     for i, name in enumerate(names):
         est, true = record.estimated_trajectories[i], record.true_trajectories[i]
-        # A real robot has no ground truth to be scored against, and a run shorter than a
-        # keyframe has no estimate within the truth's span.
-        if len(true) >= 2 and np.any((est[:, 0] >= true[0, 0]) & (est[:, 0] <= true[-1, 0])):
+        online = record.online_trajectories[i]
+        # A real robot has no ground truth to be scored against, a run shorter than a
+        # keyframe has no estimate within the truth's span, and a served run's truth may
+        # start after its server's first steps.
+        if _within(est[:, 0], true):
             scored.append((est[:, 0], est[:, 1:], true[:, 0], true[:, 1:]))
             localization[name] = localization_errors(*scored[-1])
+        if _within(online[:, 0], true):
+            online_localization[name] = localization_errors(
+                online[:, 0], online[:, 1:], true[:, 0], true[:, 1:]
+            )
     cell_area_m2 = scenario.world.spec.resolution_m**2
     if count > 1 and all(len(true) for true in record.true_trajectories):
         true_xy = _common_clock_xy(record.true_trajectories)
@@ -331,6 +344,7 @@ def _metrics(
         "real_time_factor": time_s / max(wall_time_s, 1e-9),
         "timing": timing(dict(zip(names, done_s, strict=True))),
         "localization": localization,
+        "online_localization": online_localization,
         "team_alignment": team_alignment(scored) if scored else None,
         "coverage": {
             **coverage_by_combination(
@@ -353,6 +367,11 @@ def _metrics(
         },
         **_patrol_metrics(algorithms.server.patrol_s, log.at_explored, record, time_s),
     }
+
+
+def _within(stamps: np.ndarray, true: np.ndarray) -> bool:
+    """Whether some of ``stamps`` fall within the span of the ``[t, ...]`` truth rows."""
+    return len(true) >= 2 and bool(np.any((stamps >= true[0, 0]) & (stamps <= true[-1, 0])))
 
 
 PHASE_SHARE = 0.1

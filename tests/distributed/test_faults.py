@@ -34,6 +34,7 @@ METRIC_KEYS = {
     "real_time_factor",
     "timing",
     "localization",
+    "online_localization",
     "team_alignment",
     "coverage",
     "mapping",

@@ -119,7 +119,7 @@ def test_every_figure_has_a_numbered_caption(short_run) -> None:
 
 def test_every_numeric_table_column_states_its_unit(short_run) -> None:
     tables = parse_report(short_run.folder).tables
-    assert len(tables) == 8
+    assert len(tables) == 9
     checked = 0
     for table in tables:
         header, rows = table["header"], table["rows"]

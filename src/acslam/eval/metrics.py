@@ -66,10 +66,12 @@ def _summary(distance: np.ndarray, yaw: np.ndarray) -> dict[str, float]:
         "mae_m": float(distance.mean()),
         "rmse_m": float(np.sqrt(np.mean(distance**2))),
         "std_m": float(distance.std()),
+        "max_m": float(distance.max()),
         "final_yaw_rad": float(yaw[-1]),
         "mae_yaw_rad": float(yaw.mean()),
         "rmse_yaw_rad": float(np.sqrt(np.mean(yaw**2))),
         "std_yaw_rad": float(yaw.std()),
+        "max_yaw_rad": float(yaw.max()),
     }
 
 

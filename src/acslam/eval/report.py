@@ -43,7 +43,12 @@ CONFUSION_COLOURS = {
 class RunRecord:
     """Everything the figures need: maps, masks, trajectories ``[t, x, y, theta]``, and
     each server stage's wall time ``[simulated time s, wall s]`` each time it ran
-    (``stage_timings[k]`` for ``stage_names[k]``; empty in records written before)."""
+    (``stage_timings[k]`` for ``stage_names[k]``; empty in records written before).
+
+    ``estimated_trajectories`` are the keyframes as the final estimate places them;
+    ``online_trajectories`` each robot's pose as the server used it at every step, before
+    any later correction (what it drove and mapped by; empty in records written before).
+    """
 
     spec: GridSpec
     true_occupied: np.ndarray
@@ -58,6 +63,7 @@ class RunRecord:
     stage_names: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=str))
     stage_timings: list[np.ndarray] = field(default_factory=list)
     control_period_s: float = 0.1
+    online_trajectories: list[np.ndarray] = field(default_factory=list)
 
     def save(self, path: Path) -> None:
         arrays: dict[str, np.ndarray] = {
@@ -528,6 +534,19 @@ def _localization_table(metrics: dict) -> str:
     alignment = metrics.get("team_alignment")  # absent from runs written before it
     if alignment:
         table += _note(team_alignment_text(alignment))
+    online = metrics.get("online_localization")  # absent from runs written before it
+    if online:
+        table += _note(
+            "The pose each robot was driven and mapped by, at every control step, before any "
+            "later correction (the table above scores the final estimate of the keyframes):"
+        )
+        table += _table(
+            ["robot", "RMSE [m]", "max [m]", "yaw RMSE [rad]", "max yaw error [rad]"],
+            [
+                [name, m["rmse_m"], m["max_m"], m["rmse_yaw_rad"], m["max_yaw_rad"]]
+                for name, m in online.items()
+            ],
+        )
     return table
 
 
@@ -814,6 +833,8 @@ class _Localization(_Section):
     mae_yaw_rad: float
     rmse_yaw_rad: float
     std_yaw_rad: float
+    max_m: float | None = None  # runs written before the maxima were recorded lack them
+    max_yaw_rad: float | None = None
 
 
 class _Coverage(_Section):
@@ -855,6 +876,7 @@ class ReportedMetrics(_Section):
     real_time_factor: float
     timing: _Timing
     localization: dict[str, _Localization]
+    online_localization: dict[str, _Localization] | None = None  # absent from older runs
     coverage: _Coverage
     mapping: _Mapping
     safety: dict[str, float | None]  # infinite in runs written before JSON was strict
