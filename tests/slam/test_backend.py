@@ -301,6 +301,66 @@ def test_closely_spaced_landmarks_keep_their_identities() -> None:
     assert len(set(nearest.tolist())) >= 0.9 * len(truth_lms)  # twins stay two landmarks
 
 
+def _still(backend: SlamBackend, robot: int, stamp: float, turn_rad: float = 0.0) -> None:
+    backend.add_odometry(OdometryIncrement(robot, stamp, stamp - DT, 0.0, 0.0, turn_rad))
+
+
+def test_an_unmapped_landmark_beside_a_mapped_one_never_becomes_it() -> None:
+    """A robot maps landmark A, then sees only B, 0.27 m beside A, and starts B as a
+    tentative (beyond the new-landmark gate of A). A turn on the spot then makes its
+    heading uncertain enough that B falls inside A's gate. No point of B may become A:
+    A is older than B's tentative, so the two compete and the point is ambiguous."""
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3)})
+    mapped, unmapped = np.array([[2.0, 0.0, 0.5]]), np.array([[2.0, 0.27, 0.5]])
+    stamp = 0.0
+    for _ in range(3):
+        stamp += DT
+        _still(backend, 0, stamp)
+        backend.add_landmarks(LandmarkObservations(0, stamp, mapped))
+    backend.update()
+    stamp += DT
+    _still(backend, 0, stamp)
+    assert backend.add_landmarks(LandmarkObservations(0, stamp, unmapped))[0].tentative
+    for _ in range(40):  # one turn, in 40 steps
+        stamp += DT
+        _still(backend, 0, stamp, 2 * math.pi / 40)
+    backend.update()
+    heading_sigma_rad = math.sqrt(backend.pose_covariance(backend.robot(0))[2, 2])
+    # Sideways at 2 m the heading's doubt now exceeds B's distance from A / sqrt(gate).
+    assert 2.0 * heading_sigma_rad > 0.27 / math.sqrt(SlamConfig().association_mahalanobis_gate)
+    for _ in range(6):
+        stamp += DT
+        _still(backend, 0, stamp)
+        result = backend.add_landmarks(LandmarkObservations(0, stamp, unmapped))[0]
+        assert result.landmark != 0 and 0 not in result.probabilities
+        backend.update()
+    assert np.allclose(backend.landmarks(), mapped, atol=1e-6)  # A was never pulled
+
+
+def test_a_tentative_gives_way_to_a_landmark_confirmed_after_it() -> None:
+    """Robot 0 starts a tentative landmark; robot 1 then confirms a landmark at the same
+    place. Robot 0's next points of it go to the confirmed landmark (the tentative is its
+    duplicate), not into a second landmark."""
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3), 1: np.array([4.0, 0.0, math.pi])})
+    stamp = DT
+    for robot in (0, 1):
+        _still(backend, robot, stamp)
+    assert backend.add_landmarks(LandmarkObservations(0, stamp, np.array([[2.0, 0.0, 0.5]])))[
+        0
+    ].tentative
+    for _ in range(3):
+        stamp += DT
+        for robot in (0, 1):
+            _still(backend, robot, stamp)
+        backend.add_landmarks(LandmarkObservations(1, stamp, np.array([[2.0, 0.0, 0.5]])))
+    backend.update()
+    assert len(backend.landmarks()) == 1
+    stamp += DT
+    _still(backend, 0, stamp)
+    result = backend.add_landmarks(LandmarkObservations(0, stamp, np.array([[2.0, 0.0, 0.5]])))
+    assert result[0].landmark == 0 and result[0].probabilities == {0: 1.0}
+
+
 def test_scan_constraint_overrides_biased_odometry() -> None:
     """Odometry says 1.0 m; a tight scan match between the keyframes' scans says 1.1 m
     (with the second scan taken 0.05 m after its keyframe): the keyframe moves to 1.1."""

@@ -47,12 +47,17 @@ if TYPE_CHECKING:
 
 @dataclass
 class _Tentative:
-    """A landmark seen but not yet confirmed: its observations wait outside the graph."""
+    """A landmark seen but not yet confirmed: its observations wait outside the graph.
+
+    ``landmarks_before``: how many landmarks the graph held when it was started. Those
+    were judged distinct from it then (its first point was beyond the new-landmark gate
+    of each one the rest of its frame left free); only a later one may be its duplicate."""
 
     robot_id: int
     observations: list[tuple[int, np.ndarray, np.ndarray]]  # (pose key, z_kf, cov_kf)
     kf_index: int
     stamp: float
+    landmarks_before: int
     descriptor: np.ndarray | None = None
 
 
@@ -272,7 +277,10 @@ class LandmarkAssociation:
             results.append(result)
         for n in new_points:
             descriptor = None if frame.descriptors is None else frame.descriptors[n]
-            tentative = _Tentative(robot.robot_id, [], len(robot.pose_keys) - 1, stamp, descriptor)
+            tentative = _Tentative(
+                robot.robot_id, [], len(robot.pose_keys) - 1, stamp,
+                len(self.backend.landmark_positions), descriptor,
+            )  # fmt: skip
             self._tentatives.append(tentative)
             results[n] = self._observe_tentative(robot, stamp, tentative, frame, n)
         return results
@@ -410,15 +418,22 @@ class LandmarkAssociation:
                 self.dropped_ambiguous += 1
                 return AssociationResult(-1, False, {})
             return None
-        # A confirmed landmark in the gate takes precedence over this robot's tentatives:
-        # a tentative that competes with one is most likely its duplicate (seen by this
-        # robot before another robot's observations confirmed it), and letting the two
-        # split the probability would drop every point until the tentative expires.
+        # A confirmed landmark in the gate takes precedence over a tentative it may
+        # duplicate: one confirmed after the tentative was started (seen by this robot
+        # before another robot's observations confirmed it). Letting the two split the
+        # probability would drop every point until the tentative expires. An older
+        # landmark was judged distinct from the tentative when it started, so the two
+        # compete: an unmapped landmark a few decimetres from a mapped one, seen by a
+        # robot whose pose is uncertain, must not become the mapped one (on office_b,
+        # such a factor moved a robot's estimate half a metre, and it drove into a wall).
         excluded = others.copy()
         n_conf = len(confirmed)
         row = np.where(others[:n_conf], np.inf, d2[n, :n_conf])
-        if column >= n_conf and n_conf and row.min() <= gate:
-            column = int(np.argmin(row))
+        if column >= n_conf and n_conf:
+            newer = np.array(confirmed) >= scores.tentatives[column - n_conf].landmarks_before
+            row = np.where(newer, row, np.inf)
+            if row.min() <= gate:
+                column = int(np.argmin(row))
         if column < n_conf:
             excluded[n_conf:] = True
         cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, excluded)
