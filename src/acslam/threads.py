@@ -4,14 +4,13 @@
 The searches that fill a decision (the robots' A* paths, the travel graph's Dijkstras)
 are numba functions that release the GIL, so plain Python threads run them in parallel.
 Threads that wait asleep, rather than numba's parallel loops, whose OpenMP workers spin
-between loops and so slow everything else where the cores are shared. Work is striped:
-of ``n`` threads, thread ``t`` takes tasks ``t, t + n, ...``, the calling thread being
-thread 0, so each thread can keep one workspace for all its tasks. What the tasks compute
-does not depend on the thread count.
+between loops and so slow everything else where the cores are shared. The calling thread
+is one of them. What the tasks compute does not depend on the thread count.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -23,7 +22,8 @@ T = TypeVar("T")
 
 def striped(work: Callable[[int, int], None], tasks: int) -> None:
     """Call ``work(first, step)`` once per thread, for as many threads as numba has and
-    there are tasks; ``work`` does tasks ``first, first + step, ...``."""
+    there are tasks; ``work`` does tasks ``first, first + step, ...`` (the calling thread
+    ``first = 0``), so each thread can keep one workspace for all its tasks."""
     threads = max(1, min(numba.config.NUMBA_NUM_THREADS, tasks))
     if threads == 1:
         work(0, 1)
@@ -36,12 +36,15 @@ def striped(work: Callable[[int, int], None], tasks: int) -> None:
 
 
 def mapped(work: Callable[[int], T], count: int) -> list[T]:
-    """``[work(0), ..., work(count - 1)]``, the calls striped over the threads."""
+    """``[work(0), ..., work(count - 1)]`` on the same threads, each taking the next task
+    when it is free: one robot's path can take ten times another's, and fixed stripes
+    would leave a thread waiting."""
     results: list[T | None] = [None] * count
+    tasks = itertools.count()  # next() on it is atomic under the GIL
 
-    def stripe(first: int, step: int) -> None:
-        for task in range(first, count, step):
+    def take(_first: int, _step: int) -> None:
+        while (task := next(tasks)) < count:
             results[task] = work(task)
 
-    striped(stripe, count)
+    striped(take, count)
     return results  # type: ignore[return-value]
