@@ -305,7 +305,7 @@ def scenarios_command() -> None:
     rows = []
     for name in builtin_scenario_names():
         config, _ = load_scenario_config(name)
-        robots = config.robots.count or len(config.robots.starts or []) or 1
+        robots = config.robots.team_size()
         rows.append((name, config.world.generator, plural(robots, "robot"), config.description))
     widths = [max(len(row[k]) for row in rows) for k in range(3)]
     for row in rows:

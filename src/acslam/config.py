@@ -24,6 +24,7 @@ from pydantic import (
     SerializeAsAny,
     ValidationError,
     WrapValidator,
+    field_validator,
     model_validator,
 )
 from pydantic_core import PydanticCustomError
@@ -161,15 +162,35 @@ class LandmarkConfig(Section):
 
 
 class RobotsConfig(Section):
-    """The team: start poses ``[x, y, theta]`` and the TurtleBot3 Burger's limits."""
+    """The team: start poses ``[x, y, theta]`` and the TurtleBot3 Burger's limits.
+
+    ``starts``: a list of poses; ``random``, a seeded draw spread over the world, each
+    start at least ``min_start_separation_m`` from the others and out of their sight
+    (:mod:`acslam.worlds.starts`); or none, the world's suggested starts.
+    """
 
     count: Annotated[int, Field(ge=1)] | None = None
-    starts: list[Pose] | None = None
+    starts: list[Pose] | Literal["random"] | None = None
+    min_start_separation_m: PositiveFloat = 3.0
     radius_m: PositiveFloat = 0.105
     max_v_mps: PositiveFloat = 0.22
     max_omega_radps: PositiveFloat = 2.84
     max_acc_v_mps2: PositiveFloat = 0.5
     max_acc_omega_radps2: PositiveFloat = 3.0
+
+    @field_validator("starts", mode="before")
+    @classmethod
+    def _starts_word(cls, value: Any) -> Any:
+        """One clear error for a word other than ``random``, not one per union member."""
+        if isinstance(value, str) and value != "random":
+            raise ValueError(f"{value!r}: give a list of [x, y, theta] poses or 'random'")
+        return value
+
+    def team_size(self) -> int:
+        """``count``, else one robot per listed start, else one."""
+        if self.count is not None:
+            return self.count
+        return len(self.starts) if isinstance(self.starts, list) and self.starts else 1
 
 
 # --------------------------------------------------------------------------- sensors
@@ -657,10 +678,17 @@ def builtin_scenario_names() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+def _is_union_member(item: Any) -> bool:
+    """A location item that names a member of a union type (``list[...]``,
+    ``literal['random']``) rather than a field: field names hold no brackets."""
+    return isinstance(item, str) and "[" in item
+
+
 def _field_path(loc: tuple[Any, ...]) -> str:
-    """Pydantic error location -> ``robots.starts[1]``, without the world's union tag."""
+    """Pydantic error location -> ``robots.starts[1]``, without union members' tags."""
     if len(loc) > 1 and loc[0] == "world" and isinstance(loc[1], str) and loc[1] in _WORLD_TAGS:
         loc = loc[:1] + loc[2:]
+    loc = tuple(item for item in loc if not _is_union_member(item))
     parts: list[str] = []
     for item in loc:
         parts.append(f"[{item}]" if isinstance(item, int) else ("." if parts else "") + str(item))
@@ -706,7 +734,15 @@ def validated(model: type[BaseModel], data: Any, source: str | Path, prefix: str
     try:
         return model.model_validate(data)
     except ValidationError as exc:
-        errors = exc.errors()
+        # A value no member of a union takes fails each; the literal members' failures
+        # ("should be 'random'") say least about what is wrong with the value given.
+        errors = [
+            error
+            for error in exc.errors()
+            if not any(
+                _is_union_member(item) and item.startswith("literal[") for item in error["loc"]
+            )
+        ] or exc.errors()
         first = errors[0]
         more = f" (and {plural(len(errors) - 1, 'more problem')})" if len(errors) > 1 else ""
         message = first["msg"].removeprefix("Value error, ")

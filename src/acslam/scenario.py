@@ -20,6 +20,7 @@ from acslam.text import plural
 from acslam.worlds.generators import build_world
 from acslam.worlds.landmarks import place_landmarks
 from acslam.worlds.limits import check_world_grid
+from acslam.worlds.starts import draw_random_starts
 from acslam.worlds.world import World
 
 
@@ -115,7 +116,7 @@ def build_scenario(
     about it names ``robots_field`` (the option or grid field that gave it).
     """
     team = config.robots
-    count = robots or team.count or (len(team.starts) if team.starts else 1)
+    count = robots or team.team_size()
     check_world_grid(config, source, count)
     try:
         world = build_world(config.world, config.seed)
@@ -123,7 +124,24 @@ def build_scenario(
         if exc.source != ConfigError(None, "", "").source:
             raise
         raise ConfigError(source, exc.field, exc.problem) from None
-    if team.starts is not None:
+    if team.starts == "random":
+        drawn = draw_random_starts(
+            world,
+            count,
+            team.radius_m,
+            team.min_start_separation_m,
+            rng(config.seed, Stream.STARTS),
+        )
+        if drawn is None:
+            raise ConfigError(
+                source,
+                "robots.starts",
+                f"no {plural(count, 'random start')} {team.min_start_separation_m:g} m apart "
+                f"and out of each other's sight fit in world {world.name!r}: lower "
+                "robots.min_start_separation_m or the robot count",
+            )
+        available, field = drawn, "robots.starts (random)"
+    elif team.starts is not None:
         available, field = np.array(team.starts, dtype=float), "robots.starts"
     else:
         available, field = world.default_starts, "robots.starts (the world's default starts)"

@@ -18,6 +18,7 @@ class Stream(IntEnum):
     ODOMETRY = 2
     LIDAR = 3
     CAMERA = 4
+    STARTS = 5
 
 
 def rng(seed: int, stream: Stream, robot_id: int | None = None) -> np.random.Generator:
