@@ -56,7 +56,11 @@ def fake_metrics(
             "translation_m": [0.1, 0.0],
             "centroid_shift_m": 0.1,
         },
-        "coverage": {**coverage, "explored_fraction_of_reachable": 0.99},
+        "coverage": {
+            **coverage,
+            "explored_fraction_of_reachable": 0.99,
+            "reachable_area_m2": 67.3,
+        },
         "mapping": {"accuracy": 0.95, "tpr": 0.9, "tnr": 0.96, "fpr": 0.04, "fnr": 0.1},
         "waste": {
             "overlap_ratio": overlap_ratio,
@@ -201,6 +205,19 @@ def test_thesis_tables_aggregate_over_seeds(sweep_dir: Path) -> None:
     team = [row for row in text.split(f"### {waste}")[1].splitlines() if "| 1.2 | team |" in row]
     assert team[0].split("|")[3:5] == [" 102.3 ± 119.0 ", " 10.0 ± 0.0 "]
     assert "worker process died (boom)" in html_path.read_text()
+
+
+def test_worlds_table_sets_our_layouts_beside_the_thesis_text(sweep_dir: Path) -> None:
+    text = write_summary(sweep_dir)[0].read_text()
+    title = "Our worlds and the thesis's labs (§5.2)"
+    exp1 = table_row(text, title, "exp1")
+    assert exp1[2:5] == ["67.3", "1", "(20.0, 17.5), (19.3, 17.5), (20.7, 17.5), facing 90°"]
+    assert exp1[5].startswith("a closed start area with a single opening")
+    assert exp1[6] == "65.07"  # Table 5.3(c), the team of three
+    exp2 = table_row(text, title, "exp2")
+    # Our start room has one opening per initial frontier the thesis names.
+    assert exp2[3] == "3" and exp2[5].startswith("three initial frontiers")
+    assert "predefined starting locations, not given" in text
 
 
 def test_comparison_scaling_and_every_run_listed(sweep_dir: Path) -> None:

@@ -26,6 +26,7 @@ from acslam.experiments.grid import DEFAULT_ALLOCATOR, DEFAULT_PLANNER
 from acslam.experiments.sweep import FAILURE_FILE, SPEC_FILE, SWEEP_FILE
 from acslam.files import read_json, write_text
 from acslam.text import plural
+from acslam.worlds.thesis import thesis_layout
 
 Cell = tuple[str, int, str, str]  # scenario, robots, planner, allocator
 THESIS_NAME = {v: k for k, v in thesis_data.THESIS_ROBOT.items()}
@@ -376,6 +377,50 @@ def mapping_table(title: str, teams: dict[object, list[RunOutcome]]) -> Table:
     return Table(title, ["metric [%]"] + [str(k) for k in teams], rows)
 
 
+def _starts_text(starts: tuple[tuple[float, float, float], ...]) -> str:
+    headings = {round(math.degrees(theta)) for _, _, theta in starts}
+    poses = ", ".join(f"({x:.1f}, {y:.1f})" for x, y, _ in starts)
+    facing = ", ".join(f"{h}°" for h in sorted(headings))
+    return f"{poses}, facing {facing}"
+
+
+def worlds_table(experiments: list[tuple[int, dict[int, list[RunOutcome]]]]) -> Table:
+    """How our layouts differ from the thesis's labs: the text is all the thesis gives."""
+    rows = []
+    for experiment, teams in experiments:
+        layout = thesis_layout(experiment)
+        runs = [r for team in teams.values() for r in team]
+        # The same world in every run: one value, not a spread.
+        reachable = cell_stat(runs, _get("coverage", "reachable_area_m2"))
+        rows.append(
+            [
+                f"exp{experiment}",
+                layout.summary,
+                fmt_value(reachable.mean if reachable else None, 1),
+                str(len(layout.start_openings)),
+                _starts_text(layout.starts),
+                thesis_data.ENVIRONMENT[experiment],
+                fmt_value(thesis_data.thesis_team_area_m2(experiment), 2),
+            ]
+        )
+    return Table(
+        "Our worlds and the thesis's labs (§5.2)",
+        [
+            "experiment",
+            "ours: layout",
+            "ours: reachable free area [m²]",
+            "ours: openings of the start area",
+            "ours: starts [x, y in m] (robot_0, robot_1, robot_2)",
+            "thesis: environment",
+            "thesis: area the team mapped [m²]",
+        ],
+        rows,
+        "The thesis shows its labs only as photos, so our layouts keep what its text states: "
+        "the initial frontiers and about the area the team mapped. Their distances, and so "
+        f"the exploration times, are ours. Thesis starts: {thesis_data.STARTS} (§5.4).",
+    )
+
+
 def thesis_sections(cells: dict[Cell, list[RunOutcome]]) -> list[Section]:
     sections = []
     speedups = []
@@ -416,6 +461,7 @@ def thesis_sections(cells: dict[Cell, list[RunOutcome]]) -> list[Section]:
         )
         speedups.append((experiment, teams))
     if speedups:
+        sections.insert(0, Section("Worlds", tables=[worlds_table(speedups)]))
         sections.append(Section("Speed-up over one robot", tables=[speedup_table(speedups)]))
     return sections
 

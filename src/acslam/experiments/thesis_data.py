@@ -154,6 +154,28 @@ COVERAGE: dict[int, dict[int, dict[tuple[str, ...], tuple[float, float]]]] = {
 }
 
 
+# §5.2 and §5.4: what the thesis says of each environment (its figures are photos) and of
+# the starts ("predefined starting locations", not given).
+ENVIRONMENT = {
+    1: "a closed start area with a single opening: one initial frontier, at most two more "
+    "found later",
+    2: "three initial frontiers, one per robot",
+    3: "a slightly more complex structure with four initial frontiers",
+    4: "a labyrinth-style structure with five initial frontiers",
+    5: "a big area of the PIC4SeR floor: the laboratory and other rooms",
+}
+STARTS = "predefined starting locations, not given"
+
+
+def thesis_team_area_m2(experiment: int) -> float | None:
+    """The area the largest team mapped (the 100 % row of the coverage table) [m^2]."""
+    teams = COVERAGE.get(experiment, {})
+    if not teams:
+        return None
+    rows = teams[max(teams)]
+    return max(area for area, _ in rows.values())
+
+
 def our_combination(thesis_robots: tuple[str, ...]) -> str:
     """``("robot_12", "robot_13")`` -> ``"robot_0+robot_1"`` (our metrics.json key)."""
     ours = sorted(THESIS_ROBOT[name] for name in thesis_robots)

@@ -7,17 +7,8 @@ the explorable area (tables 5.1-5.9 report about 65 m² for experiments 1-4 and 
 the designed free space, which sits around the grid centre (20, 20). Spaces are
 axis-aligned rectangles separated by 0.15 m walls (an uncarved strip); an opening is a
 rectangle carved through such a wall. The robots start ~0.7 m apart in the start area.
-
-- exp1: a 4 m x 4 m start room whose only opening (north) leads into a 10 m corridor;
-  its two ends open into a west and an east room, the two frontiers found later.
-- exp2: a 4 m x 4 m start room with three symmetric doors (west, north, east), each into
-  a 4 m x 4 m room: three initial frontiers, one per robot.
-- exp3: a 4 m x 4 m start room with four doors: rooms to the north and south, and 3 m
-  corridors west and east that end in 3 m x 3 m rooms.
-- exp4: a 4 m x 3 m start room with five openings into a labyrinth of 1.2 m corridors
-  with turns, dead ends and one loop (the two north-west branches meet).
-- exp5: a floor: a 7 m x 4.5 m lab (the start area) with two doors onto a 16 m
-  corridor, three offices across it and a store room at its east end.
+Each layout's ``summary`` says what it holds; the experiments' summary tables print it
+beside the thesis's own description.
 """
 
 from __future__ import annotations
@@ -42,12 +33,14 @@ Rect = tuple[float, float, float, float]
 
 @dataclass(frozen=True)
 class ThesisLayout:
-    """A layout in metres: free rectangles, the start area, its openings, the starts."""
+    """A layout in metres: free rectangles, the start area, its openings, the starts, and
+    one sentence saying what it holds."""
 
     spaces: tuple[Rect, ...]
     start_area: Rect
     start_openings: tuple[Rect, ...]
     starts: tuple[tuple[float, float, float], ...]
+    summary: str
 
 
 def _corridor(points: list[tuple[float, float]], width: float = CORRIDOR_M) -> list[Rect]:
@@ -73,10 +66,15 @@ def _layout(
     openings: tuple[Rect, ...],
     rooms: tuple[Rect, ...],
     starts: tuple[tuple[float, float, float], ...],
+    summary: str,
 ) -> ThesisLayout:
     """A layout whose robots start in ``start``, which ``openings`` join to the ``rooms``."""
     return ThesisLayout(
-        spaces=(start, *openings, *rooms), start_area=start, start_openings=openings, starts=starts
+        spaces=(start, *openings, *rooms),
+        start_area=start,
+        start_openings=openings,
+        starts=starts,
+        summary=summary,
     )
 
 
@@ -87,7 +85,12 @@ def _exp1() -> ThesisLayout:
     west, east = (10.85, 19.0, 14.85, 23.5), (25.15, 19.0, 29.15, 23.5)
     west_door, east_door = (14.85, 20.4, 15.0, 21.4), (25.0, 20.4, 25.15, 21.4)
     return _layout(
-        start, (door,), (corridor, west, east, west_door, east_door), _row_starts(17.5, math.pi / 2)
+        start,
+        (door,),
+        (corridor, west, east, west_door, east_door),
+        _row_starts(17.5, math.pi / 2),
+        "a 4 m x 4 m start room whose only opening (north) leads into a 10 m corridor; its "
+        "two ends open into a west and an east room, the two frontiers found later",
     )
 
 
@@ -95,7 +98,14 @@ def _exp2() -> ThesisLayout:
     start = (18.0, 17.0, 22.0, 21.0)
     doors = ((17.85, 18.5, 18.0, 19.5), (19.5, 21.0, 20.5, 21.15), (22.0, 18.5, 22.15, 19.5))
     rooms = ((13.85, 17.0, 17.85, 21.0), (18.0, 21.15, 22.0, 25.15), (22.15, 17.0, 26.15, 21.0))
-    return _layout(start, doors, rooms, _row_starts(18.2, math.pi / 2))
+    return _layout(
+        start,
+        doors,
+        rooms,
+        _row_starts(18.2, math.pi / 2),
+        "a 4 m x 4 m start room with three symmetric doors (west, north, east), each into a "
+        "4 m x 4 m room: three initial frontiers, one per robot",
+    )
 
 
 def _exp3() -> ThesisLayout:
@@ -124,6 +134,8 @@ def _exp3() -> ThesisLayout:
             east_door,
         ),
         _row_starts(20.9, 0.0),
+        "a 4 m x 4 m start room with four doors: rooms to the north and south, and 3 m "
+        "corridors west and east that end in 3 m x 3 m rooms",
     )
 
 
@@ -149,7 +161,14 @@ def _exp4() -> ThesisLayout:
         [(20.0, 17.75), (20.0, 16.9), (15.4, 16.9), (15.4, 14.6)],
     ]
     corridors = [rect for branch in branches for rect in _corridor(branch)]
-    return _layout(start, openings, tuple(corridors), _row_starts(19.6, math.pi / 2))
+    return _layout(
+        start,
+        openings,
+        tuple(corridors),
+        _row_starts(19.6, math.pi / 2),
+        "a 4 m x 3 m start room with five openings into a labyrinth of 1.2 m corridors with "
+        "turns, dead ends and one loop (the two north-west branches meet)",
+    )
 
 
 def _exp5() -> ThesisLayout:
@@ -165,7 +184,14 @@ def _exp5() -> ThesisLayout:
     store = (28.15, 16.0, 31.15, 19.5)
     store_door = (28.0, 18.6, 28.15, 19.6)
     rooms = (corridor, *offices, *office_doors, store, store_door)
-    return _layout(lab, lab_doors, rooms, _row_starts(22.0, -math.pi / 2))
+    return _layout(
+        lab,
+        lab_doors,
+        rooms,
+        _row_starts(22.0, -math.pi / 2),
+        "a floor: a 7 m x 4.5 m lab (the start area) with two doors onto a 16 m corridor, "
+        "three offices across it and a store room at its east end",
+    )
 
 
 LAYOUTS = {1: _exp1, 2: _exp2, 3: _exp3, 4: _exp4, 5: _exp5}
