@@ -343,6 +343,83 @@ def map_command(
     )
 
 
+@cli.command("merge", short_help="Find where map B lies in map A; write the merged map.")
+@click.argument("map_a", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("map_b", type=click.Path(dir_okay=False, path_type=Path))
+@out_option(
+    "Folder for merge.json, merge.png and, when the merge is accepted, map.yaml + map.pgm.",
+    required=True,
+)
+def merge_command(map_a: Path, map_b: Path, out_dir: Path, overwrite: bool) -> None:
+    """Find where MAP_B lies in MAP_A (ROS map_server YAML files, same resolution) with no
+    guess: every position and heading is searched, and the best pose is accepted only
+    with real overlap, no walls of B in A's free space, and no rival pose that fits as
+    well. Writes the decision to merge.json and both maps with the merged one to
+    merge.png; exits with status 1 when no merge is accepted."""
+    import numpy as np
+
+    from acslam.errors import ConfigError
+    from acslam.eval.slam_figures import plot_map_panels
+    from acslam.geometry import transform_points
+    from acslam.mapping.merge import MergeParams, find_merge, merge_maps
+    from acslam.worlds.mapio import load_map, save_map
+
+    values_a, spec_a = load_map(map_a)
+    values_b, spec_b = load_map(map_b)
+    if not math.isclose(spec_a.resolution_m, spec_b.resolution_m, rel_tol=1e-9):
+        raise ConfigError(
+            map_b,
+            "resolution",
+            f"{spec_b.resolution_m:g} m differs from {map_a}'s {spec_a.resolution_m:g} m: "
+            "resample one map first",
+        )
+    decision = find_merge(values_a, spec_a, values_b, spec_b)
+    with output_folder(out_dir, overwrite=overwrite):
+        summary = {
+            "map_a": str(map_a),
+            "map_b": str(map_b),
+            "accepted": decision.accepted,
+            "reason": decision.reason,
+            "pose_b_in_a": None if decision.pose is None else [float(v) for v in decision.pose],
+            "score": decision.score,
+            "second_score": decision.second_score,
+            "matched_points": decision.matched_points,
+            "points": decision.points,
+            "contradiction": decision.contradiction,
+            "angle_step_rad": decision.angle_step_rad,
+            "resolution_m": decision.resolution_m,
+        }
+        write_json(out_dir / "merge.json", summary)
+        panels = [
+            (values_a, spec_a, [], f"A: {map_a.name}"),
+            (values_b, spec_b, [], f"B: {map_b.name}"),
+        ]
+        if decision.accepted:
+            merged, spec = merge_maps(values_a, spec_a, values_b, spec_b, decision.pose)
+            save_map(out_dir / "map", merged, spec)
+            left, right, bottom, top = spec_b.extent_m
+            corners = [[left, bottom], [right, bottom], [right, top], [left, top], [left, bottom]]
+            outline = transform_points(decision.pose, np.array(corners))
+            panels.append((merged, spec, [outline], "merged (B's grid outlined)"))
+        plot_map_panels(out_dir / "merge.png", panels)
+    if not decision.accepted:
+        click.echo(f"no merge: {decision.reason} -> {out_dir}")
+        sys.exit(1)
+    x, y, theta = decision.pose
+    rivals = (
+        f"the best rival, ruled out by A's free space, scores "
+        f"{100 * decision.second_score / decision.score:.0f} % as well"
+        if decision.second_score > 0
+        else f"no other pose scores within {100 * MergeParams().max_second_ratio:.0f} % of it"
+    )
+    click.echo(
+        f"B lies in A at x {x:.3f} m, y {y:.3f} m, heading {theta:.4f} rad (to within a "
+        f"{decision.resolution_m:g} m cell and {decision.angle_step_rad:.4f} rad); "
+        f"{decision.matched_points} of B's {decision.points} surface points on A's walls; "
+        f"{rivals} -> {out_dir}"
+    )
+
+
 @cli.command("run", short_help="Explore a scenario with the server in the loop.")
 @scenario_option
 @robots_option

@@ -34,11 +34,16 @@ def test_ratio_is_value_over_reference_and_json_keeps_it(tmp_path: Path) -> None
 
 
 def test_scan_matching_figure_is_measured_against_its_reference() -> None:
-    (figure,) = bench_scan_matching(quick=True)
+    figure, window, everywhere = bench_scan_matching(quick=True)
     assert figure.value > 0 and figure.reference_value > 0
     assert figure.ratio == pytest.approx(figure.value / figure.reference_value)
     # ICP of 360-beam scans costs far more than building one scan's KD-tree.
     assert figure.ratio > 1
+    # Branch and bound is timed against the exhaustive search of the same poses, and
+    # the benchmark checks that both found the same one.
+    assert window.reference == "exhaustive search of the same poses"
+    assert window.note.endswith("the same pose found")
+    assert everywhere.value > 0 and everywhere.reference_value > 0
 
 
 @pytest.mark.slow
@@ -56,6 +61,7 @@ def test_bench_quick_covers_every_group(tmp_path: Path) -> None:
         "cells expanded per second",
         "FGP joint solve, 8 robots",
         "iSAM2",
+        "global match, branch and bound",
     )
     for expected in expected_names:
         assert expected in names

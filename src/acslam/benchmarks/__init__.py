@@ -1,11 +1,11 @@
 """``acslam bench``: every module timed against a reference measured in the same process.
 
-Groups: server (cycle per module in a short default run), mapping, scan matching,
-exploration (EWFD vs the naive frontier scan, clustering, allocation), planning (A* vs
-pyastar2d or scipy, FGP per team size), slam (iSAM2 and the loop-closure candidate search
-vs graph size), simulator (real-time factor), team (the server cycle with 1, 3 and 10
-robots against elapsed time). ``--quick`` shrinks every problem so the
-whole set takes about a minute.
+Groups: server (cycle per module in a short default run), mapping, scan matching (ICP,
+and the global branch-and-bound match against the exhaustive search), exploration (EWFD
+vs the naive frontier scan, clustering, allocation), planning (A* vs pyastar2d or scipy,
+FGP per team size), slam (iSAM2 and the loop-closure candidate search vs graph size),
+simulator (real-time factor), team (the server cycle with 1, 3 and 10 robots against
+elapsed time). ``--quick`` shrinks every problem so the whole set takes about a minute.
 """
 
 from __future__ import annotations

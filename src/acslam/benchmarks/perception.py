@@ -31,6 +31,12 @@ from acslam.exploration.frontiers import (
 from acslam.exploration.params import DbscanParams, FactorGraphParams
 from acslam.geometry import compose
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window, bresenham
+from acslam.mapping.correlative import (
+    LikelihoodPyramid,
+    SearchWindow,
+    best_match,
+    exhaustive_match,
+)
 from acslam.mapping.costmap import CostmapUpdater, compute_costmap
 from acslam.mapping.occupancy import LogOddsGrid, TeamMap, grid_spec_for_bounds
 from acslam.mapping.params import SubmapMappingConfig
@@ -247,6 +253,52 @@ def bench_scan_matching(quick: bool) -> list[Figure]:
             "cKDTree build of one scan",
             tree_ms,
             "goal <= 5 ms",
+        ),
+        *_global_matching_figures(quick, tree_ms),
+    ]
+
+
+def _global_matching_figures(quick: bool, tree_ms: float) -> list[Figure]:
+    """Branch and bound against the exhaustive search of the same poses (a window 1 m and
+    0.5 rad around the truth), and over the whole thesis labyrinth at every heading."""
+    world = build_world(ThesisWorld(generator="thesis", experiment=4), 0)
+    pyramid = LikelihoodPyramid.from_occupancy(world_cells(world), world.spec, 0.1, 7)
+    sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(0))
+    pose = np.array([14.6, 22.0, 2.0])
+    scan = sensor.scan(0, 0.0, tuple(pose), np.zeros((0, 3)), -1)
+    seen = np.isfinite(scan.ranges) & (scan.ranges > 0)
+    points = np.column_stack(
+        [
+            scan.ranges[seen] * np.cos(scan.angles[seen]),
+            scan.ranges[seen] * np.sin(scan.angles[seen]),
+        ]
+    )
+    window = SearchWindow.around(pose, points, 1.0, 0.5)
+    repeats = 3 if quick else 10
+    bnb_ms = median_ms(lambda: best_match(points, pyramid, window), repeats)
+    exhaustive_ms = median_ms(lambda: exhaustive_match(points, pyramid, window), 1 if quick else 3)
+    fast, slow = best_match(points, pyramid, window), exhaustive_match(points, pyramid, window)
+    same = fast is not None and slow is not None and np.array_equal(fast.pose, slow.pose)
+    everywhere = SearchWindow.covering(world.spec, points)
+    global_ms = median_ms(lambda: best_match(points, pyramid, everywhere), repeats)
+    return [
+        Figure(
+            "scan matching",
+            "global match, branch and bound (1 m, 0.5 rad window)",
+            bnb_ms,
+            "ms",
+            "exhaustive search of the same poses",
+            exhaustive_ms,
+            f"{len(points)} points; " + ("the same pose found" if same else "POSES DIFFER"),
+        ),
+        Figure(
+            "scan matching",
+            "global match, whole 40 m x 40 m labyrinth, every heading",
+            global_ms,
+            "ms",
+            "cKDTree build of one scan",
+            tree_ms,
+            "no pose guess",
         ),
     ]
 

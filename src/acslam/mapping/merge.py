@@ -1,0 +1,215 @@
+"""Merging two maps whose relative pose is unknown: find it, verify it, compose.
+
+Two robots that start apart each map in their own frame. Where does map B lie in map A?
+B's surfaces are thinned to points and matched globally against A's likelihood field
+(:mod:`acslam.mapping.correlative`: every position at every heading, exactly, by branch
+and bound). A wrong merge is worse than a late one, so the best pose is accepted only if
+
+- enough of B's points lie on A's surfaces (``min_matched_points``): real overlap, not a
+  few walls that happen to fit;
+- few of B's points fall in A's free space (``max_contradiction``): B's walls must not
+  cross what A saw empty;
+- every other pose that scores nearly as well (``max_second_ratio``) and lies at least
+  ``distinct_m`` or ``distinct_rad`` away is ruled out by free space: at it, clearly
+  more of B's walls stand where A saw nothing. In a symmetric building two poses fit
+  equally, and which one is right cannot be told until a map holds what breaks the
+  symmetry.
+
+The merged map is A's grid grown to hold B; a cell one map left unknown takes the
+other's value, and where they disagree, occupied wins (what a planner must avoid).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from acslam.geometry import between, transform_points
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from acslam.mapping.correlative import (
+    LikelihoodPyramid,
+    Match,
+    SearchWindow,
+    best_match,
+    surface_cells,
+)
+
+
+@dataclass(frozen=True)
+class MergeParams:
+    """How the match is searched and what it must show to be accepted."""
+
+    # The likelihood field's width: a point this far from A's surface scores e^-0.5.
+    sigma_m: float = 0.1
+    # Levels of the branch-and-bound pyramid: the coarsest block is 2^depth cells.
+    depth: int = 7
+    # B's surfaces thinned to one point per square of this side.
+    point_spacing_m: float = 0.1
+    min_matched_points: int = 100
+    max_contradiction: float = 0.1
+    # Another pose is a rival when it scores at least this share of the best and lies
+    # distinct_m or distinct_rad away; a rival is ruled out by refuting_points more of
+    # B's points in A's free space than the best pose has. Up to max_alternatives rivals
+    # are examined.
+    max_second_ratio: float = 0.9
+    distinct_m: float = 1.0
+    distinct_rad: float = 0.35
+    refuting_points: int = 10
+    max_alternatives: int = 5
+
+
+@dataclass(frozen=True)
+class MergeDecision:
+    """The search's answer: ``pose`` is B's frame in A's frame (``[x, y, theta]``, m, rad)
+    when one was found; ``accepted`` says whether it passed every check, ``reason`` why
+    not. ``matched_points``: B's points within ``sigma_m`` of A's surfaces;
+    ``contradiction``: the share of B's points in A's free space, away from its surfaces;
+    ``second_score``: the best rival pose's score (0 if none came near)."""
+
+    accepted: bool
+    reason: str
+    pose: np.ndarray | None
+    score: float
+    second_score: float
+    matched_points: int
+    points: int
+    contradiction: float
+    angle_step_rad: float
+    resolution_m: float
+
+
+def surface_points(values: np.ndarray, spec: GridSpec, spacing_m: float) -> np.ndarray:
+    """(N, 2) centres of the map's surface cells, one per ``spacing_m`` square."""
+    rows, cols = np.nonzero(surface_cells(np.asarray(values) == OCCUPIED))
+    xy = spec.cell_to_world(np.stack([rows, cols], axis=1))
+    bins = np.floor(xy / spacing_m).astype(np.int64)
+    _, first = np.unique(bins, axis=0, return_index=True)
+    return xy[np.sort(first)]
+
+
+def _lookup(values: np.ndarray, spec: GridSpec, points_m: np.ndarray) -> np.ndarray:
+    """Each point's cell value; UNKNOWN beyond the grid."""
+    cells = spec.world_to_cell(points_m)
+    inside = spec.contains(cells)
+    out = np.full(len(points_m), UNKNOWN, dtype=np.int8)
+    out[inside] = values[cells[inside, 0], cells[inside, 1]]
+    return out
+
+
+def _free_space_hits(
+    values_a: np.ndarray, spec_a: GridSpec, pyramid: LikelihoodPyramid, placed_m: np.ndarray
+) -> int:
+    """B's points that land in A's free space, more than two sigma from its surfaces."""
+    far = pyramid.likelihood_at(placed_m) < math.exp(-2.0)
+    return int(np.count_nonzero(far & (_lookup(values_a, spec_a, placed_m) == FREE)))
+
+
+def find_merge(
+    values_a: np.ndarray,
+    spec_a: GridSpec,
+    values_b: np.ndarray,
+    spec_b: GridSpec,
+    params: MergeParams | None = None,
+) -> MergeDecision:
+    """Where map B lies in map A, searched over all of A at every heading, and verified."""
+    params = params or MergeParams()
+    points = surface_points(values_b, spec_b, params.point_spacing_m)
+    pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, params.depth)
+    empty = MergeDecision(
+        False, "", None, 0.0, 0.0, 0, len(points), 0.0, math.nan, spec_a.resolution_m
+    )
+    if len(points) == 0:
+        return _with(empty, reason="map B has no occupied cells to match")
+    window = SearchWindow.covering(spec_a, points)
+    best = best_match(points, pyramid, window)
+    if best is None:
+        return _with(empty, reason="no pose puts any of B's surfaces near A's")
+    placed = transform_points(best.pose, points)
+    matched = int(np.count_nonzero(pyramid.likelihood_at(placed) >= math.exp(-0.5)))
+    against = _free_space_hits(values_a, spec_a, pyramid, placed)
+    decision = MergeDecision(
+        True, "", best.pose, best.score, 0.0, matched, len(points), against / len(points),
+        best.angle_step_rad, best.resolution_m,
+    )  # fmt: skip
+    if matched < params.min_matched_points:
+        return _with(
+            decision,
+            accepted=False,
+            reason=f"too little overlap: {matched} of B's points on A's surfaces, "
+            f"{params.min_matched_points} needed",
+        )
+    if decision.contradiction > params.max_contradiction:
+        return _with(
+            decision,
+            accepted=False,
+            reason=f"{100 * decision.contradiction:.0f} % of B's surface points fall in A's "
+            f"free space (at most {100 * params.max_contradiction:.0f} %)",
+        )
+    # Every other pose that scores nearly as well must be ruled out by free space: B's
+    # walls where A saw nothing, clearly more of them than at the best pose.
+    ruled_out: tuple[Match, ...] = (best,)
+    while len(ruled_out) <= params.max_alternatives:
+        other = best_match(
+            points, pyramid, window, params.max_second_ratio * best.score, ruled_out,
+            params.distinct_m, params.distinct_rad,
+        )  # fmt: skip
+        if other is None:
+            return decision
+        decision = _with(decision, second_score=max(decision.second_score, other.score))
+        extra = _free_space_hits(values_a, spec_a, pyramid, transform_points(other.pose, points))
+        if extra - against < params.refuting_points:
+            x, y, theta = other.pose
+            return _with(
+                decision,
+                accepted=False,
+                reason=f"ambiguous: the pose ({x:.2f}, {y:.2f}, {theta:.2f}) scores "
+                f"{100 * other.score / best.score:.0f} % as well and nothing in A's free "
+                "space rules it out",
+            )
+        ruled_out = (*ruled_out, other)
+    return _with(
+        decision,
+        accepted=False,
+        reason=f"more than {params.max_alternatives} other poses score nearly as well",
+    )
+
+
+def _with(decision: MergeDecision, **changes: object) -> MergeDecision:
+    fields = {**decision.__dict__, **changes}
+    return MergeDecision(**fields)  # type: ignore[arg-type]
+
+
+def merge_maps(
+    values_a: np.ndarray,
+    spec_a: GridSpec,
+    values_b: np.ndarray,
+    spec_b: GridSpec,
+    pose_b_in_a: np.ndarray,
+) -> tuple[np.ndarray, GridSpec]:
+    """A's grid grown to hold B placed at ``pose_b_in_a``; unknown takes the other's
+    value and a disagreement is occupied."""
+    res = spec_a.resolution_m
+    left, right, bottom, top = spec_b.extent_m
+    corners_b = np.array([[left, bottom], [right, bottom], [left, top], [right, top]])
+    placed = transform_points(pose_b_in_a, corners_b)
+    lo = np.minimum(placed.min(axis=0), [spec_a.origin_x_m, spec_a.origin_y_m])
+    hi = np.maximum(placed.max(axis=0), [spec_a.extent_m[1], spec_a.extent_m[3]])
+    # Whole cells of A's lattice, so A's cells are copied, not resampled.
+    shift = np.floor((lo - [spec_a.origin_x_m, spec_a.origin_y_m]) / res).astype(int)
+    origin = np.array([spec_a.origin_x_m, spec_a.origin_y_m]) + shift * res
+    cols, rows = np.ceil((hi - origin) / res).astype(int)
+    spec = GridSpec(float(origin[0]), float(origin[1]), res, int(rows), int(cols))
+    merged = np.full(spec.shape, UNKNOWN, dtype=np.int8)
+    r0, c0 = -shift[1], -shift[0]
+    merged[r0 : r0 + spec_a.rows, c0 : c0 + spec_a.cols] = values_a
+    rr, cc = np.mgrid[0 : spec.rows, 0 : spec.cols]
+    centres = spec.cell_to_world(np.stack([rr.ravel(), cc.ravel()], axis=1))
+    inverse = between(np.asarray(pose_b_in_a, dtype=float), np.zeros(3))
+    from_b = _lookup(values_b, spec_b, transform_points(inverse, centres)).reshape(spec.shape)
+    unknown = merged == UNKNOWN
+    merged[unknown] = from_b[unknown]
+    disagree = (~unknown) & (from_b != UNKNOWN) & (from_b != merged)
+    merged[disagree] = OCCUPIED
+    return merged, spec
