@@ -905,6 +905,13 @@ def _namespaces(ctx: click.Context, param: click.Parameter, value: str | None) -
     "stays where a live run's was when it stopped (a bag of `acslam run --record` then "
     "replays to the run's own trajectories).",
 )
+@click.option(
+    "--unknown-starts",
+    is_flag=True,
+    help="The robots' relative start poses are unknown: each robot is replayed in its own "
+    "frame and the maps are merged where a verified match is found (writes "
+    "merge_<robot>.png per merge).",
+)
 @algorithms_option(None)
 def slam_rosbag_command(
     bag: Path,
@@ -914,6 +921,7 @@ def slam_rosbag_command(
     scan_topic: str,
     odom_topic: str,
     finish: bool,
+    unknown_starts: bool,
     algorithms_file: Path | None,
 ) -> None:
     """Replay a ROS bag (rosbag2 .mcap/.db3 or its folder, or ROS 1 .bag) through SLAM and
@@ -923,18 +931,38 @@ def slam_rosbag_command(
     pose (its odom frame taken as the map frame); one TUM trajectory of the base per robot.
     """
     from acslam.replay.rosbag import run_rosbag
+    from acslam.replay.unknown_starts import run_rosbag_unknown_starts
     from acslam.ros2.source import Ros2Topics
 
     algorithms = _algorithms(algorithms_file)
+    topics = Ros2Topics(scan=scan_topic, odom=odom_topic)
     with output_folder(out_dir, overwrite=overwrite):
-        metrics = run_rosbag(
-            bag,
-            out_dir,
-            namespaces=namespaces,
-            topics=Ros2Topics(scan=scan_topic, odom=odom_topic),
-            algorithms=algorithms,
-            finish=finish,
+        if unknown_starts:
+            metrics = run_rosbag_unknown_starts(
+                bag, out_dir, namespaces=namespaces, topics=topics, algorithms=algorithms,
+                finish=finish,
+            )  # fmt: skip
+        else:
+            metrics = run_rosbag(
+                bag, out_dir, namespaces=namespaces, topics=topics, algorithms=algorithms,
+                finish=finish,
+            )  # fmt: skip
+    if unknown_starts:
+        lines = []
+        for name, robot in metrics["robots"].items():
+            merge = robot["merge"]
+            if merge is None:
+                lines.append(f"{name}: the reference frame")
+            elif robot["merged"]:
+                x, y, theta = merge["pose_in_reference"]
+                lines.append(f"{name}: merged at ({x:.2f} m, {y:.2f} m, {theta:.3f} rad)")
+            else:
+                lines.append(f"{name}: not merged ({merge['reason']})")
+        click.echo(
+            "; ".join(lines) + f"; {metrics['log_duration_s']:.0f} s of bag in "
+            f"{metrics['wall_time_s']:.0f} s -> {out_dir}"
         )
+        return
     robots = ", ".join(
         f"{name}: {plural(robot['scans_used'], 'scan')}, {plural(robot['keyframes'], 'keyframe')}"
         + (" (scan-matching odometry)" if robot["odometry"] == "scan matching" else "")

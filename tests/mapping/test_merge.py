@@ -166,6 +166,32 @@ def test_a_symmetric_view_is_not_merged_until_the_symmetry_is_broken() -> None:
     assert distance_m <= 2 * RESOLUTION_M and angle_rad <= 2 * decision.angle_step_rad
 
 
+def test_the_best_scoring_pose_is_passed_over_when_it_puts_walls_in_free_space() -> None:
+    """Two like rooms; B knows the east one, with its pillar. A saw all of the west room
+    but only the south half of the east one: B fits the west room best by score, but
+    there its pillar stands in A's free space, so the east room, where nothing
+    contradicts B, is the merge."""
+    truth = building((22.0, 10.0), [(1.0, 1.0, 9.0, 8.0), (12.0, 1.0, 20.0, 8.0)])
+    values, spec = truth
+    centres = spec.cell_to_world(np.argwhere(np.ones(spec.shape, dtype=bool)))
+    x, y = centres[:, 0], centres[:, 1]
+    # The same wall stub in each room breaks each room's own symmetry ...
+    stubs = (np.abs(y - 2.0) < 0.08) & (((x > 1.0) & (x < 3.0)) | ((x > 12.0) & (x < 14.0)))
+    # ... and a pillar only in the east room tells the rooms apart.
+    pillar = (np.abs(x - 16.0) < 0.6) & (np.abs(y - 6.0) < 0.6)
+    values.reshape(-1)[stubs | pillar] = OCCUPIED
+    frame_a = np.array([11.0, 5.0, 0.0])
+    frame_b = np.array([16.0, 4.0, 1.2])
+    map_a = seen_map(truth, frame_a, lambda p: (p[:, 0] < 10.0) | (p[:, 1] < 4.5), 24.0)
+    map_b = seen_map(truth, frame_b, lambda p: p[:, 0] > 11.0, 12.0)
+    decision = find_merge(*map_a, *map_b)
+    assert decision.accepted, decision.reason
+    assert decision.second_score > decision.score  # the west room scored better
+    relative = compose(np.array([-11.0, -5.0, 0.0]), frame_b)
+    distance_m, angle_rad = _pose_error(decision.pose, relative)
+    assert distance_m <= 2 * RESOLUTION_M and angle_rad <= 2 * decision.angle_step_rad
+
+
 def test_the_same_maps_give_the_same_decision() -> None:
     truth = two_rooms()
     map_a = seen_map(truth, np.array([4.0, 4.0, 0.0]), lambda p: p[:, 0] < 9.5, 16.0)

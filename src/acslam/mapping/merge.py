@@ -3,12 +3,12 @@
 Two robots that start apart each map in their own frame. Where does map B lie in map A?
 B's surfaces are thinned to points and matched globally against A's likelihood field
 (:mod:`acslam.mapping.correlative`: every position at every heading, exactly, by branch
-and bound). A wrong merge is worse than a late one, so the best pose is accepted only if
+and bound). B's walls must not cross what A saw empty, so a pose that puts more than
+``max_contradiction`` of B's points in A's free space is passed over for the next best.
+A wrong merge is worse than a late one, so the best pose left is accepted only if
 
 - enough of B's points lie on A's surfaces (``min_matched_points``): real overlap, not a
   few walls that happen to fit;
-- few of B's points fall in A's free space (``max_contradiction``): B's walls must not
-  cross what A saw empty;
 - every other pose that scores nearly as well (``max_second_ratio``) and lies at least
   ``distinct_m`` or ``distinct_rad`` away is ruled out by free space: at it, clearly
   more of B's walls stand where A saw nothing. In a symmetric building two poses fit
@@ -123,15 +123,36 @@ def find_merge(
     if len(points) == 0:
         return _with(empty, reason="map B has no occupied cells to match")
     window = SearchWindow.covering(spec_a, points)
-    best = best_match(points, pyramid, window)
-    if best is None:
-        return _with(empty, reason="no pose puts any of B's surfaces near A's")
-    placed = transform_points(best.pose, points)
+    # The best pose that A's free space does not contradict: one that puts B's walls
+    # where A saw nothing is passed over for the next best (kept with its count).
+    contradicted: list[tuple[Match, int]] = []
+    while True:
+        best = best_match(
+            points, pyramid, window, 0.0, tuple(m for m, _ in contradicted),
+            params.distinct_m, params.distinct_rad,
+        )  # fmt: skip
+        if best is None:
+            crossing = " without crossing A's free space" if contradicted else ""
+            return _with(empty, reason=f"no pose puts B's surfaces near A's{crossing}")
+        placed = transform_points(best.pose, points)
+        against = _free_space_hits(values_a, spec_a, pyramid, placed)
+        if against <= params.max_contradiction * len(points):
+            break
+        if len(contradicted) == params.max_alternatives:
+            return _with(
+                empty,
+                pose=best.pose,
+                score=best.score,
+                contradiction=against / len(points),
+                reason=f"the {len(contradicted) + 1} best poses each put more than "
+                f"{100 * params.max_contradiction:.0f} % of B's surface points in A's free "
+                "space",
+            )
+        contradicted.append((best, against))
     matched = int(np.count_nonzero(pyramid.likelihood_at(placed) >= math.exp(-0.5)))
-    against = _free_space_hits(values_a, spec_a, pyramid, placed)
     decision = MergeDecision(
-        True, "", best.pose, best.score, 0.0, matched, len(points), against / len(points),
-        best.angle_step_rad, best.resolution_m,
+        True, "", best.pose, best.score, max((m.score for m, _ in contradicted), default=0.0),
+        matched, len(points), against / len(points), best.angle_step_rad, best.resolution_m,
     )  # fmt: skip
     if matched < params.min_matched_points:
         return _with(
@@ -140,16 +161,13 @@ def find_merge(
             reason=f"too little overlap: {matched} of B's points on A's surfaces, "
             f"{params.min_matched_points} needed",
         )
-    if decision.contradiction > params.max_contradiction:
-        return _with(
-            decision,
-            accepted=False,
-            reason=f"{100 * decision.contradiction:.0f} % of B's surface points fall in A's "
-            f"free space (at most {100 * params.max_contradiction:.0f} %)",
-        )
-    # Every other pose that scores nearly as well must be ruled out by free space: B's
-    # walls where A saw nothing, clearly more of them than at the best pose.
-    ruled_out: tuple[Match, ...] = (best,)
+    # Every other pose that scores nearly as well (or better, and was passed over) must be
+    # ruled out by free space: B's walls where A saw nothing, clearly more of them than at
+    # the best pose.
+    for other, hits in contradicted:
+        if hits - against < params.refuting_points:
+            return _ambiguous(decision, other, best)
+    ruled_out: tuple[Match, ...] = (*(m for m, _ in contradicted), best)
     while len(ruled_out) <= params.max_alternatives:
         other = best_match(
             points, pyramid, window, params.max_second_ratio * best.score, ruled_out,
@@ -160,19 +178,23 @@ def find_merge(
         decision = _with(decision, second_score=max(decision.second_score, other.score))
         extra = _free_space_hits(values_a, spec_a, pyramid, transform_points(other.pose, points))
         if extra - against < params.refuting_points:
-            x, y, theta = other.pose
-            return _with(
-                decision,
-                accepted=False,
-                reason=f"ambiguous: the pose ({x:.2f}, {y:.2f}, {theta:.2f}) scores "
-                f"{100 * other.score / best.score:.0f} % as well and nothing in A's free "
-                "space rules it out",
-            )
+            return _ambiguous(decision, other, best)
         ruled_out = (*ruled_out, other)
     return _with(
         decision,
         accepted=False,
         reason=f"more than {params.max_alternatives} other poses score nearly as well",
+    )
+
+
+def _ambiguous(decision: MergeDecision, other: Match, best: Match) -> MergeDecision:
+    x, y, theta = other.pose
+    return _with(
+        decision,
+        accepted=False,
+        reason=f"ambiguous: the pose ({x:.2f}, {y:.2f}, {theta:.2f}) scores "
+        f"{100 * other.score / best.score:.0f} % as well and nothing in A's free space "
+        "rules it out",
     )
 
 

@@ -22,7 +22,8 @@ estimate.
 
 Start poses: each robot starts at its first odometry pose, its odometry frame taken as the
 map frame. Robots whose odometry frames differ are therefore not aligned with each other
-(nothing in a bag says how they are).
+(nothing in a bag says how they are); :mod:`acslam.replay.unknown_starts` replays them
+each in its own frame and merges their maps instead.
 
 A robot without an odometry topic gets scan-matching odometry: each scan is matched to
 the one before (:func:`~acslam.mapping.scan_matching.match_scans` with the algorithms'
@@ -198,19 +199,25 @@ def _mount(path: Path, robot: BagRobot) -> np.ndarray:
 @dataclass(frozen=True)
 class RobotStream:
     """A robot's messages for the localizer, with what they were made from: its laser
-    mount, start (laser) pose and stamp, and the pairing that placed them."""
+    mount, start (laser) pose and stamp, its first odometry pose (of the base, in the
+    odometry frame), and the pairing that placed them."""
 
     robot: BagRobot
     mount: np.ndarray
     start: np.ndarray
     start_stamp_s: float
+    odometry_start: np.ndarray
     messages: list[RobotMessage]
     pairing: OdometryPairing
     scan_matched: bool
 
 
-def _stream(path: Path, robot: BagRobot, config: ScanMatchingConfig) -> RobotStream:
-    """The robot's odometry, scans and landmark frames paired into one ordered stream."""
+def _stream(
+    path: Path, robot: BagRobot, config: ScanMatchingConfig, own_frame: bool
+) -> RobotStream:
+    """The robot's odometry, scans and landmark frames paired into one ordered stream;
+    with ``own_frame``, the robot starts at the origin of its own frame (its base there),
+    not at its first odometry pose."""
     if not robot.scans:
         raise DataError(path, f"robot {robot.name}: its scan topic has no messages")
     scan_matched = not robot.odometry
@@ -243,8 +250,10 @@ def _stream(path: Path, robot: BagRobot, config: ScanMatchingConfig) -> RobotStr
         else:
             messages += pairing.landmarks(payload)
     first_stamp_s, first_pose = min(odometry, key=lambda sample: sample[0])
-    start = compose(first_pose, mount)
-    return RobotStream(robot, mount, start, first_stamp_s, messages, pairing, scan_matched)
+    start = mount if own_frame else compose(first_pose, mount)
+    return RobotStream(
+        robot, mount, start, first_stamp_s, first_pose, messages, pairing, scan_matched
+    )
 
 
 def _dead_reckoned(stream: RobotStream) -> dict[int, np.ndarray]:
@@ -274,7 +283,7 @@ def _posed_scans(
         laser = np.array([slam_poses[k] for k in mine]).reshape(-1, 3)
         inverse_mount = between(stream.mount, np.zeros(3))
         base = np.array([compose(pose, inverse_mount) for pose in laser]).reshape(-1, 3)
-        write_tum(out_dir / _trajectory_name(stream.robot.namespace), stamps, base)
+        write_tum(out_dir / trajectory_name(stream.robot.namespace), stamps, base)
         slam_tracks.append(laser)
         odometry_tracks.append(np.array([odometry_poses[k] for k in mine]).reshape(-1, 3))
     return (
@@ -283,7 +292,7 @@ def _posed_scans(
     )
 
 
-def _trajectory_name(namespace: str) -> str:
+def trajectory_name(namespace: str) -> str:
     return f"trajectory_{namespace.replace('/', '_')}.tum" if namespace else "trajectory.tum"
 
 
@@ -313,14 +322,16 @@ def replay_bag(
     topics: Ros2Topics | None = None,
     algorithms: AlgorithmsConfig | None = None,
     finish: bool = True,
+    own_frames: bool = False,
 ) -> BagReplay:
     """Play the robots of ``namespaces`` ("" = the root) through the localizer stage
     ``algorithms`` names (default: the simulated robots', a scenario's defaults); without
     ``finish``, no last loop search and settling at the end, as a live run ends (a bag of
-    ``acslam run --record`` then replays to the run's own estimate)."""
+    ``acslam run --record`` then replays to the run's own estimate). With
+    ``own_frames``, each robot starts at the origin of its own frame."""
     algorithms = algorithms or AlgorithmsConfig()
     robots, read_topics = _read(bag, namespaces, topics or Ros2Topics())
-    streams = [_stream(bag.path, robot, algorithms.scan_matching) for robot in robots]
+    streams = [_stream(bag.path, robot, algorithms.scan_matching, own_frames) for robot in robots]
     messages = sorted(
         (message for stream in streams for message in stream.messages),
         key=lambda m: (m.stamp, m.robot_id),
@@ -367,7 +378,7 @@ def run_rosbag(
         "bag": str(path),
         "topics": replay.topics,
         "robots": {
-            stream.robot.name: _robot_metrics(stream, kept, localizer) for stream in replay.streams
+            stream.robot.name: robot_metrics(stream, kept, localizer) for stream in replay.streams
         },
         "trajectory_frame": "base (the odometry's child frame), one pose per kept scan",
         "finished": finish,
@@ -376,11 +387,11 @@ def run_rosbag(
     return write_metrics(out_dir, metrics)
 
 
-def _robot_metrics(stream: RobotStream, kept: Sequence[KeptScan], localizer: Localizer) -> dict:
+def robot_metrics(stream: RobotStream, kept: Sequence[KeptScan], localizer: Localizer) -> dict:
     robot = stream.robot
     _, keyframe_poses = localizer.trajectory(robot.index)
     return {
-        "trajectory": _trajectory_name(robot.namespace),
+        "trajectory": trajectory_name(robot.namespace),
         "odometry": "scan matching" if stream.scan_matched else "odometry topic",
         "frames": {kind: list(frames) for kind, frames in robot.frames.items()},
         "mount_xytheta": stream.mount.tolist(),
