@@ -55,13 +55,15 @@ def _random_map(rng: np.random.Generator) -> tuple[np.ndarray, GridSpec]:
     return values, spec
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_branch_and_bound_returns_what_the_exhaustive_search_returns(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "count"), [*((s, 80) for s in range(6)), (6, 1200), (7, 1200)])
+def test_branch_and_bound_returns_what_the_exhaustive_search_returns(seed: int, count: int) -> None:
+    """With more than SEED_POINTS points, the search starts from a subsample's answer:
+    it must still return the exhaustive search's."""
     rng = np.random.default_rng(seed)
     values, spec = _random_map(rng)
     pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)
     occupied = np.argwhere(values == OCCUPIED)
-    picked = spec.cell_to_world(occupied[rng.choice(len(occupied), 80, replace=False)])
+    picked = spec.cell_to_world(occupied[rng.choice(len(occupied), count, replace=count > 80)])
     truth = np.array([1.5, 1.5, 0.0]) + rng.uniform([-0.2, -0.2, -0.2], [0.2, 0.2, 0.2])
     # The points in the frame of ``truth``, with 2 cm of noise.
     c, s = math.cos(truth[2]), math.sin(truth[2])

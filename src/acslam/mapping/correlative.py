@@ -334,21 +334,31 @@ def _exhaustive(
     return best_s, best_k, best_x, best_y
 
 
+def _leaf(candidates: _Candidates, pose: np.ndarray, res: float) -> tuple[int, int, int]:
+    """The (angle, dx, dy) of the search's grid nearest ``pose``."""
+    theta = float(pose[2])
+    c, s = math.cos(theta), math.sin(theta)
+    cx, cy = candidates.centroid_m
+    centroid_xy = pose[:2] + np.array([c * cx - s * cy, s * cx + c * cy])
+    dx, dy = np.rint((centroid_xy - candidates.corner_xy_m) / res).astype(int)
+    k = int(np.argmin(np.abs(wrap_angles(candidates.angles_rad - theta))))
+    return k, int(dx), int(dy)
+
+
 def _zones(
     candidates: _Candidates, around: list[Match], radius_m: float, angle_rad: float, res: float
 ) -> np.ndarray:
     """(Z, 5) zones (k0, dx0, dy0, rk, rxy) of the leaves near each pose of ``around``."""
     zones = np.zeros((len(around), 5), dtype=np.int64)
-    cx, cy = candidates.centroid_m
+    angle_steps = math.floor(angle_rad / candidates.angle_step_rad)
     for z, match in enumerate(around):
-        theta = float(match.pose[2])
-        c, s = math.cos(theta), math.sin(theta)
-        centroid_xy = match.pose[:2] + np.array([c * cx - s * cy, s * cx + c * cy])
-        dx, dy = np.rint((centroid_xy - candidates.corner_xy_m) / res).astype(int)
-        k0 = int(np.argmin(np.abs(wrap_angles(candidates.angles_rad - theta))))
-        angle_steps = math.floor(angle_rad / candidates.angle_step_rad)
-        zones[z] = (k0, dx, dy, angle_steps, math.floor(radius_m / res))
+        zones[z] = (*_leaf(candidates, match.pose, res), angle_steps, math.floor(radius_m / res))
     return zones
+
+
+SEED_POINTS = 400
+"""Above this many points, a search first runs on every n-th point (about this many), and
+its answer, scored on all points, is the bound the full search starts from."""
 
 
 def best_match(
@@ -399,18 +409,43 @@ def _search(
     excluded_angle_rad: float,
     exhaustive: bool,
 ) -> Match | None:
+    points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
     candidates = _candidates(points_m, pyramid.spec, window)
     res = pyramid.spec.resolution_m
     zones = _zones(candidates, list(excluded), excluded_radius_m, excluded_angle_rad, res)
     wraps = window.half_angle_rad >= math.pi
+    ring = len(candidates.angles_rad) if wraps else 10**9
     if exhaustive:
         score, k, dx, dy = _exhaustive(
             pyramid.levels[0], pyramid.pad, candidates.cells, *candidates.offsets, zones, wraps
         )
-    else:
-        score, k, dx, dy = _branch_and_bound(
-            pyramid.levels, candidates.cells, *candidates.offsets, min_score, zones, wraps
-        )
+        return None if k < 0 else _match(candidates, k, dx, dy, score, res)
+    # Branch and bound prunes by the best leaf found so far, and finds a good one late
+    # when it starts from nothing: a search on a subsample gives a leaf whose score on
+    # every point is a true lower bound of the answer to start from (it stays exact).
+    seed = None
+    if len(points_m) > SEED_POINTS:
+        every = math.ceil(len(points_m) / SEED_POINTS)
+        rough = _search(
+            points_m[::every], pyramid, window, 0.0, excluded, excluded_radius_m,
+            excluded_angle_rad, exhaustive=False,
+        )  # fmt: skip
+        if rough is not None:
+            k, dx, dy = _leaf(candidates, rough.pose, res)
+            columns, rows = candidates.offsets
+            if 0 <= dx < columns and 0 <= dy < rows and not _excluded(k, dx, dy, zones, ring):
+                leaf_score = _score(pyramid.levels[0], candidates.cells[k], dx, dy, pyramid.pad)
+                if leaf_score > min_score:
+                    seed, min_score = (k, dx, dy, leaf_score), leaf_score
+    score, k, dx, dy = _branch_and_bound(
+        pyramid.levels, candidates.cells, *candidates.offsets, min_score, zones, wraps
+    )
     if k < 0:
-        return None
+        if seed is None:
+            return None
+        k, dx, dy, score = seed  # no leaf beats the seed: it is the answer
+    return _match(candidates, k, dx, dy, score, res)
+
+
+def _match(candidates: _Candidates, k: int, dx: int, dy: int, score: float, res: float) -> Match:
     return Match(_pose(candidates, k, dx, dy, res), float(score), candidates.angle_step_rad, res)
