@@ -11,6 +11,7 @@ from acslam.config import DungeonWorld, LidarConfig, MappingConfig
 from acslam.exploration.frontiers import (
     EwfdFrontierDetector,
     active_radius_m,
+    away_from_robots,
     frontier_mask,
     reachable_free_mask,
     reachable_frontier_cells,
@@ -150,3 +151,19 @@ def test_ewfd_matches_oracle_on_simulated_multi_robot_exploration(seed: int) -> 
         assert _as_set(got) == _as_set(reachable_frontier_cells(values, robot_cells))
         checked += 1
     assert checked == 100
+
+
+def test_frontier_cells_around_a_robot_are_left_out_by_exact_distance() -> None:
+    """With a 0.16 m radius, cells 3 cells (0.15 m) from the robot's cell are dropped, those
+    4 cells (0.2 m) away and the far cluster kept, and every cell without robots."""
+    spec = GridSpec(0.0, 0.0, 0.05, 40, 40)
+    robot = np.array([[20, 20]])
+    rim = np.array([[17, 20], [20, 23], [16, 20], [20, 24], [23, 20]])
+    far = np.array([[5, 5], [5, 6], [6, 5]])
+    cells = np.vstack([rim, far])
+    kept = away_from_robots(cells, robot, spec, 0.16)
+    assert kept.tolist() == [[16, 20], [20, 24], *far.tolist()]
+    # Two robots: each drops what lies near it.
+    both = away_from_robots(cells, np.array([[20, 20], [5, 5]]), spec, 0.16)
+    assert both.tolist() == [[16, 20], [20, 24]]
+    assert away_from_robots(cells, np.zeros((0, 2)), spec, 0.16).tolist() == cells.tolist()

@@ -106,10 +106,11 @@ class FactorGraphParams(UtilityParams):
     # shared cluster costs 1 - lambda in log units, metres of travel at alpha = 1 per m.
     # Ours is 20 m, the span of the thesis labs: two robots share a cluster only when no
     # other is within 20 m more of travel, or there are fewer clusters than robots (where
-    # the Hungarian baseline leaves a robot idle). The thesis's lambda << 1 (0.01, the
-    # ``thesis`` allocator) prices sharing at ~1 m, so robots crowd one frontier: over 10
-    # seeds on experiments 1-5 with 3 robots it explored 2-31 % slower than Hungarian,
-    # 20 m within 5 % of it or faster (examples/grids/allocators-10-seeds.yaml).
+    # the Hungarian baseline also sends the robots left over to their best cluster). The
+    # thesis's lambda << 1 (0.01, the ``thesis`` allocator) prices sharing at ~1 m, so
+    # robots crowd one frontier: over 10 seeds on experiments 1-5 with 3 robots it
+    # explored 2-31 % slower than Hungarian; 20 m is 8 % faster on experiment 4 and at
+    # most 5.4 % slower on the others (examples/grids/allocators-10-seeds.yaml).
     conflict_lambda: FiniteFloat = -19.0
     # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
     # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments

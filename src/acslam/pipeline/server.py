@@ -40,6 +40,7 @@ from acslam import threads
 from acslam.config import ScenarioConfig
 from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
+from acslam.exploration.frontiers import away_from_robots
 from acslam.exploration.patrol import Patrol
 from acslam.grid import FREE, GridSpec, Window
 from acslam.mapping.costmap import Costmap, CostmapUpdater, known_window
@@ -364,8 +365,13 @@ class Server:
         timings_s["costmap"] = time.perf_counter() - start
         start = time.perf_counter()
         frontier_cells = self._frontier_detector.update(values, robot_cells, scan_cells)
+        # A robot's blind disc (its body, its LiDAR's minimum range) and the cell ring
+        # around it: no frontier a robot could explore by going there.
+        blind_m = max(self._config.robots.radius_m, self._config.sensors.lidar.range_min_m)
+        reach_m = blind_m + 1.5 * self._map_spec.resolution_m  # and the free cells on its rim
+        explorable = away_from_robots(frontier_cells, robot_cells, self._map_spec, reach_m)
         clusters = self._clusterer.cluster(
-            window.to_local(frontier_cells), window.crop(values), window.spec, costmap
+            window.to_local(explorable), window.crop(values), window.spec, costmap
         )
         timings_s["frontiers"] = time.perf_counter() - start
         return _MapProducts(
