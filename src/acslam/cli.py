@@ -375,20 +375,7 @@ def merge_command(map_a: Path, map_b: Path, out_dir: Path, overwrite: bool) -> N
         )
     decision = find_merge(values_a, spec_a, values_b, spec_b)
     with output_folder(out_dir, overwrite=overwrite):
-        summary = {
-            "map_a": str(map_a),
-            "map_b": str(map_b),
-            "accepted": decision.accepted,
-            "reason": decision.reason,
-            "pose_b_in_a": None if decision.pose is None else [float(v) for v in decision.pose],
-            "score": decision.score,
-            "second_score": decision.second_score,
-            "matched_points": decision.matched_points,
-            "points": decision.points,
-            "contradiction": decision.contradiction,
-            "angle_step_rad": decision.angle_step_rad,
-            "resolution_m": decision.resolution_m,
-        }
+        summary = {"map_a": str(map_a), "map_b": str(map_b), **decision.as_dict()}
         write_json(out_dir / "merge.json", summary)
         panels = [
             (values_a, spec_a, [], f"A: {map_a.name}"),
@@ -954,7 +941,7 @@ def slam_rosbag_command(
             if merge is None:
                 lines.append(f"{name}: the reference frame")
             elif robot["merged"]:
-                x, y, theta = merge["pose_in_reference"]
+                x, y, theta = merge["pose_b_in_a"]
                 lines.append(f"{name}: merged at ({x:.2f} m, {y:.2f} m, {theta:.3f} rad)")
             else:
                 lines.append(f"{name}: not merged ({merge['reason']})")

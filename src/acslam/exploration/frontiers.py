@@ -111,10 +111,16 @@ def away_from_robots(
     """
     cells = np.asarray(frontier_cells, dtype=np.int64).reshape(-1, 2)
     robots = np.asarray(robot_cells, dtype=np.int64).reshape(-1, 2)
-    if len(cells) == 0 or len(robots) == 0:
-        return cells
-    gap_m = spec.resolution_m * np.linalg.norm(cells[:, None, :] - robots[None, :, :], axis=2)
-    return cells[(gap_m > radius_m).all(axis=1)]
+    keep = np.ones(len(cells), dtype=bool)
+    span = math.floor(radius_m / spec.resolution_m)
+    for row, col in robots:
+        # Only the cells in the robot's bounding square can lie within the radius.
+        near = np.flatnonzero(
+            (np.abs(cells[:, 0] - row) <= span) & (np.abs(cells[:, 1] - col) <= span)
+        )
+        gap_m = spec.resolution_m * np.hypot(cells[near, 0] - row, cells[near, 1] - col)
+        keep[near[gap_m <= radius_m]] = False
+    return cells[keep]
 
 
 def active_radius_m(mapping: MappingConfig) -> float:

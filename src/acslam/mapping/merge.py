@@ -23,7 +23,7 @@ other's value, and where they disagree, occupied wins (what a planner must avoid
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -85,6 +85,12 @@ class MergeDecision:
     angle_step_rad: float
     resolution_m: float
 
+    def as_dict(self) -> dict:
+        """The decision as JSON-ready values (``pose_b_in_a``: the pose as a list)."""
+        fields = asdict(self)
+        pose = fields.pop("pose")
+        return {**fields, "pose_b_in_a": None if pose is None else [float(v) for v in pose]}
+
 
 def surface_points(values: np.ndarray, spec: GridSpec, spacing_m: float) -> np.ndarray:
     """(N, 2) centres of the map's surface cells, one per ``spacing_m`` square."""
@@ -127,7 +133,7 @@ def find_merge(
         False, "", None, 0.0, 0.0, 0, len(points), 0.0, math.nan, spec_a.resolution_m
     )
     if len(points) == 0:
-        return _with(empty, reason="map B has no occupied cells to match")
+        return replace(empty, reason="map B has no occupied cells to match")
     window = SearchWindow.covering(spec_a, points)
     # The best pose that A's free space does not contradict: one that puts B's walls
     # where A saw nothing is passed over for the next best (kept with its count).
@@ -139,13 +145,13 @@ def find_merge(
         )  # fmt: skip
         if best is None:
             crossing = " without crossing A's free space" if contradicted else ""
-            return _with(empty, reason=f"no pose puts B's surfaces near A's{crossing}")
+            return replace(empty, reason=f"no pose puts B's surfaces near A's{crossing}")
         placed = transform_points(best.pose, points)
         against = _free_space_hits(values_a, spec_a, pyramid, placed)
         if against <= params.max_contradiction * len(points):
             break
         if len(contradicted) == params.max_alternatives:
-            return _with(
+            return replace(
                 empty,
                 pose=best.pose,
                 score=best.score,
@@ -161,7 +167,7 @@ def find_merge(
         matched, len(points), against / len(points), best.angle_step_rad, best.resolution_m,
     )  # fmt: skip
     if matched < params.min_matched_points:
-        return _with(
+        return replace(
             decision,
             accepted=False,
             reason=f"too little overlap: {matched} of B's points on A's surfaces, "
@@ -182,12 +188,12 @@ def find_merge(
         )  # fmt: skip
         if other is None:
             return decision
-        decision = _with(decision, second_score=max(decision.second_score, other.score))
+        decision = replace(decision, second_score=max(decision.second_score, other.score))
         extra = _free_space_hits(values_a, spec_a, pyramid, transform_points(other.pose, points))
         if extra - against < refuting:
             return _ambiguous(decision, other, best)
         ruled_out = (*ruled_out, other)
-    return _with(
+    return replace(
         decision,
         accepted=False,
         reason=f"more than {params.max_alternatives} other poses score nearly as well",
@@ -196,18 +202,13 @@ def find_merge(
 
 def _ambiguous(decision: MergeDecision, other: Match, best: Match) -> MergeDecision:
     x, y, theta = other.pose
-    return _with(
+    return replace(
         decision,
         accepted=False,
         reason=f"ambiguous: the pose ({x:.2f}, {y:.2f}, {theta:.2f}) scores "
         f"{100 * other.score / best.score:.0f} % as well and nothing in A's free space "
         "rules it out",
     )
-
-
-def _with(decision: MergeDecision, **changes: object) -> MergeDecision:
-    fields = {**decision.__dict__, **changes}
-    return MergeDecision(**fields)  # type: ignore[arg-type]
 
 
 def merge_maps(

@@ -154,21 +154,6 @@ def _odometry_error(robots: Sequence[_Robot], robot: _Robot) -> dict | None:
     }
 
 
-def _decision_metrics(decision: MergeDecision | None) -> dict | None:
-    if decision is None:
-        return None
-    return {
-        "accepted": decision.accepted,
-        "reason": decision.reason,
-        "pose_in_reference": None if decision.pose is None else decision.pose.tolist(),
-        "score": decision.score,
-        "second_score": decision.second_score,
-        "matched_points": decision.matched_points,
-        "points": decision.points,
-        "contradiction": decision.contradiction,
-    }
-
-
 def run_rosbag_unknown_starts(
     path: Path,
     out_dir: Path,
@@ -214,7 +199,7 @@ def run_rosbag_unknown_starts(
                                 robot.replay.replayed.localizer),
                 "loop_closures": robot.replay.replayed.localizer.diagnostics()["loop_closures"],
                 "merged": robot.frame_in_reference is not None,
-                "merge": _decision_metrics(robot.decision),
+                "merge": None if robot.decision is None else robot.decision.as_dict(),
                 "merge_error_vs_odometry": _odometry_error(robots, robot),
             }
             for robot in robots
