@@ -16,7 +16,7 @@ from scipy import ndimage
 from acslam.cli import cli
 from acslam.geometry import compose, transform_points, wrap_angle
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from acslam.mapping.merge import find_merge, merge_maps
+from acslam.mapping.merge import MergeParams, find_merge, merge_maps
 from acslam.worlds.mapio import load_map, save_map
 
 RESOLUTION_M = 0.05
@@ -236,7 +236,10 @@ def test_merge_command_writes_the_decision_the_merged_map_and_the_figure(tmp_pat
     result = CliRunner().invoke(cli, ["merge", str(a), str(b), "--out", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
     assert result.output.startswith("B lies in A at x ")
-    assert "no other pose scores within 90 % of it" in result.output
+    # The rivals: none near the best, or each ruled out by A's free space.
+    assert "no other pose scores within 90 %" in result.output or (
+        "ruled out by A's free space" in result.output
+    )
     decision = json.loads((tmp_path / "out" / "merge.json").read_text())
     assert decision["accepted"] and decision["reason"] == ""
     distance_m, angle_rad = _pose_error(
@@ -280,3 +283,24 @@ def test_maps_of_different_resolutions_are_one_error_naming_the_field(tmp_path: 
     assert result.returncode == 1
     assert result.stderr.startswith(f"acslam: error: {b}: resolution: 0.1 m differs from")
     assert "Traceback" not in result.stderr
+
+
+def test_a_wall_in_free_space_rules_a_pose_out_however_few_points_it_has() -> None:
+    """Two like rooms apart, a 2 m shelf only in the east one. A saw the west room, B
+    the east room: nothing overlaps, but B's room fits A's at one shift, with only the
+    shelf (under a tenth of B's points) in A's free space. Counting points alone takes
+    that pose, 11 m off; the shelf as a wall rules it out."""
+    truth = building((22.0, 10.0), [(1.0, 1.0, 10.0, 9.0), (12.0, 1.0, 21.0, 9.0)])
+    values, spec = truth
+    centres = spec.cell_to_world(np.argwhere(np.ones(spec.shape, dtype=bool)))
+    x, y = centres[:, 0], centres[:, 1]
+    stubs = (np.abs(y - 2.0) < 0.08) & (((x > 1.0) & (x < 3.0)) | ((x > 12.0) & (x < 14.0)))
+    shelf = (np.abs(y - 6.0) < 0.08) & (x > 15.0) & (x < 17.0)
+    values.reshape(-1)[stubs | shelf] = OCCUPIED
+    map_a = seen_map(truth, np.array([5.0, 5.0, 0.0]), lambda p: p[:, 0] < 10.5, 24.0)
+    map_b = seen_map(truth, np.array([16.0, 4.0, 1.2]), lambda p: p[:, 0] > 11.5, 24.0)
+    counted = find_merge(*map_a, *map_b, MergeParams(max_contradicting_wall_m=math.inf))
+    assert counted.accepted and counted.contradiction < 0.1
+    assert _pose_error(counted.pose, compose(np.array([-5.0, -5.0, 0.0]), [16.0, 4.0, 1.2]))[0] > 10
+    decision = find_merge(*map_a, *map_b)
+    assert not decision.accepted

@@ -34,7 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from acslam.geometry import wrap_angles
-from acslam.grid import OCCUPIED, GridSpec
+from acslam.grid import FREE, OCCUPIED, GridSpec
 
 
 @dataclass(frozen=True)
@@ -68,9 +68,9 @@ class LikelihoodPyramid:
     def from_occupancy(
         cls, values: np.ndarray, spec: GridSpec, sigma_m: float, depth: int
     ) -> LikelihoodPyramid:
-        """From OccupancyGrid values. Points land on surfaces: occupied cells beside one
-        that is not (a solid block's inside, as a ground-truth map has, is never hit)."""
-        surface = surface_cells(np.asarray(values) == OCCUPIED)
+        """From OccupancyGrid values. Points land on surfaces: occupied cells beside a
+        free one (a solid block's inside, as a ground-truth map has, is never hit)."""
+        surface = surface_cells(values)
         if surface.any():
             distance_m = ndimage.distance_transform_edt(~surface) * spec.resolution_m
             field = np.exp(-0.5 * (distance_m / sigma_m) ** 2).astype(np.float32)
@@ -79,9 +79,13 @@ class LikelihoodPyramid:
         return cls(spec, block_maxima(field, depth))
 
 
-def surface_cells(occupied: np.ndarray) -> np.ndarray:
-    """Occupied cells with a 4-neighbour that is not: where beams end."""
-    return occupied & ~ndimage.binary_erosion(occupied, border_value=1)
+def surface_cells(values: np.ndarray) -> np.ndarray:
+    """Occupied cells with a free 4-neighbour: where beams end. A SLAM map's wall is a
+    band of cells whose far side borders unknown space, and is as thick as the map's
+    noise made it: counting that side too biased two maps' match by a cell or two."""
+    values = np.asarray(values)
+    free_beside = ndimage.binary_dilation(values == FREE, ndimage.generate_binary_structure(2, 1))
+    return (values == OCCUPIED) & free_beside
 
 
 def block_maxima(field: np.ndarray, depth: int) -> np.ndarray:

@@ -4,7 +4,8 @@ Two robots that start apart each map in their own frame. Where does map B lie in
 B's surfaces are thinned to points and matched globally against A's likelihood field
 (:mod:`acslam.mapping.correlative`: every position at every heading, exactly, by branch
 and bound). B's walls must not cross what A saw empty, so a pose that puts more than
-``max_contradiction`` of B's points in A's free space is passed over for the next best.
+``max_contradiction`` of B's points, or a wall of ``max_contradicting_wall_m``, in A's
+free space is passed over for the next best.
 A wrong merge is worse than a late one, so the best pose left is accepted only if
 
 - enough of B's points lie on A's surfaces (``min_matched_points``): real overlap, not a
@@ -26,6 +27,11 @@ import math
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
+from scipy import ndimage
+from scipy.optimize import minimize
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from acslam.geometry import between, transform_points
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
@@ -50,6 +56,12 @@ class MergeParams:
     point_spacing_m: float = 0.1
     min_matched_points: int = 100
     max_contradiction: float = 0.1
+    # A wall of B this long in A's free space refutes a pose however few points it has:
+    # in two rooms alike but for a shelf, the half-turned pose put the 2.5 m shelf in the
+    # other room's free space with 54 of B's 700 points (under 10 %) and merged 7.6 m
+    # off. Shorter ones are not evidence: a teammate seen standing is 0.2 m across, and
+    # two SLAM maps of the IPA lab disagreed along 1.0-1.5 m at their true pose.
+    max_contradicting_wall_m: float = 1.5
     # Another pose is a rival when it scores at least this share of the best and lies
     # distinct_m or distinct_rad away; a rival is ruled out by more of B's points in A's
     # free space than the best pose has: refuting_points more, and refuting_share of all
@@ -94,7 +106,7 @@ class MergeDecision:
 
 def surface_points(values: np.ndarray, spec: GridSpec, spacing_m: float) -> np.ndarray:
     """(N, 2) centres of the map's surface cells, one per ``spacing_m`` square."""
-    rows, cols = np.nonzero(surface_cells(np.asarray(values) == OCCUPIED))
+    rows, cols = np.nonzero(surface_cells(values))
     xy = spec.cell_to_world(np.stack([rows, cols], axis=1))
     bins = np.floor(xy / spacing_m).astype(np.int64)
     _, first = np.unique(bins, axis=0, return_index=True)
@@ -112,10 +124,24 @@ def _lookup(values: np.ndarray, spec: GridSpec, points_m: np.ndarray) -> np.ndar
 
 def _free_space_hits(
     values_a: np.ndarray, spec_a: GridSpec, pyramid: LikelihoodPyramid, placed_m: np.ndarray
-) -> int:
-    """B's points that land in A's free space, more than two sigma from its surfaces."""
+) -> np.ndarray:
+    """Which of B's points land in A's free space, more than two sigma from its surfaces."""
     far = pyramid.likelihood_at(placed_m) < math.exp(-2.0)
-    return int(np.count_nonzero(far & (_lookup(values_a, spec_a, placed_m) == FREE)))
+    return far & (_lookup(values_a, spec_a, placed_m) == FREE)
+
+
+def longest_wall_m(points_m: np.ndarray, link_m: float) -> float:
+    """The largest extent (bounding-box diagonal) of a chain of points, each within
+    ``link_m`` of the next."""
+    if len(points_m) < 2:
+        return 0.0
+    pairs = cKDTree(points_m).query_pairs(link_m, output_type="ndarray")
+    links = coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points_m),) * 2
+    )
+    _, labels = connected_components(links, directed=False)
+    extents = [np.ptp(points_m[labels == k], axis=0) for k in np.unique(labels)]
+    return float(max(np.hypot(*extent) for extent in extents))
 
 
 def find_merge(
@@ -134,6 +160,12 @@ def find_merge(
     )
     if len(points) == 0:
         return replace(empty, reason="map B has no occupied cells to match")
+    if len(points) < params.min_matched_points:
+        return replace(
+            empty,
+            reason=f"too little overlap: B has {len(points)} surface points, "
+            f"{params.min_matched_points} needed on A's surfaces",
+        )
     window = SearchWindow.covering(spec_a, points)
     # The best pose that A's free space does not contradict: one that puts B's walls
     # where A saw nothing is passed over for the next best (kept with its count).
@@ -145,10 +177,18 @@ def find_merge(
         )  # fmt: skip
         if best is None:
             crossing = " without crossing A's free space" if contradicted else ""
-            return replace(empty, reason=f"no pose puts B's surfaces near A's{crossing}")
+            return replace(
+                empty,
+                reason=f"no pose puts B's surfaces near A's{crossing}",
+            )
         placed = transform_points(best.pose, points)
-        against = _free_space_hits(values_a, spec_a, pyramid, placed)
-        if against <= params.max_contradiction * len(points):
+        hits = _free_space_hits(values_a, spec_a, pyramid, placed)
+        against = int(np.count_nonzero(hits))
+        wall_m = longest_wall_m(placed[hits], 1.5 * params.point_spacing_m)
+        if (
+            against <= params.max_contradiction * len(points)
+            and wall_m < params.max_contradicting_wall_m
+        ):
             break
         if len(contradicted) == params.max_alternatives:
             return replace(
@@ -157,8 +197,8 @@ def find_merge(
                 score=best.score,
                 contradiction=against / len(points),
                 reason=f"the {len(contradicted) + 1} best poses each put more than "
-                f"{100 * params.max_contradiction:.0f} % of B's surface points in A's free "
-                "space",
+                f"{100 * params.max_contradiction:.0f} % of B's surface points, or a wall of "
+                f"{params.max_contradicting_wall_m:g} m, in A's free space",
             )
         contradicted.append((best, against))
     matched = int(np.count_nonzero(pyramid.likelihood_at(placed) >= math.exp(-0.5)))
@@ -187,9 +227,11 @@ def find_merge(
             params.distinct_m, params.distinct_rad,
         )  # fmt: skip
         if other is None:
-            return decision
+            return replace(decision, pose=refined_pose(points, pyramid, decision))
         decision = replace(decision, second_score=max(decision.second_score, other.score))
-        extra = _free_space_hits(values_a, spec_a, pyramid, transform_points(other.pose, points))
+        extra = np.count_nonzero(
+            _free_space_hits(values_a, spec_a, pyramid, transform_points(other.pose, points))
+        )
         if extra - against < refuting:
             return _ambiguous(decision, other, best)
         ruled_out = (*ruled_out, other)
@@ -198,6 +240,30 @@ def find_merge(
         accepted=False,
         reason=f"more than {params.max_alternatives} other poses score nearly as well",
     )
+
+
+def refined_pose(
+    points_m: np.ndarray, pyramid: LikelihoodPyramid, match: MergeDecision
+) -> np.ndarray:
+    """The match's pose refined off the search's lattice: the pose within a cell and an
+    angle step of it where the likelihood field, read between cell centres, is highest.
+    The lattice alone leaves up to half a cell and half a step, and a frame merged that
+    far off pulls its robots' trajectories after it."""
+    assert match.pose is not None
+    spec, pad = pyramid.spec, pyramid.pad
+    field = pyramid.levels[0]
+
+    def cost(pose: np.ndarray) -> float:
+        placed = transform_points(pose, points_m)
+        cols = (placed[:, 0] - spec.origin_x_m) / spec.resolution_m - 0.5 + pad
+        rows = (placed[:, 1] - spec.origin_y_m) / spec.resolution_m - 0.5 + pad
+        return -float(np.mean(ndimage.map_coordinates(field, [rows, cols], order=1)))
+
+    x, y, theta = match.pose
+    res, step = match.resolution_m, match.angle_step_rad
+    bounds = [(x - res, x + res), (y - res, y + res), (theta - step, theta + step)]
+    result = minimize(cost, np.array(match.pose), method="Powell", bounds=bounds)
+    return np.asarray(result.x) if result.fun < cost(np.asarray(match.pose)) else match.pose
 
 
 def _ambiguous(decision: MergeDecision, other: Match, best: Match) -> MergeDecision:
@@ -234,12 +300,77 @@ def merge_maps(
     merged = np.full(spec.shape, UNKNOWN, dtype=np.int8)
     r0, c0 = -shift[1], -shift[0]
     merged[r0 : r0 + spec_a.rows, c0 : c0 + spec_a.cols] = values_a
-    rr, cc = np.mgrid[0 : spec.rows, 0 : spec.cols]
-    centres = spec.cell_to_world(np.stack([rr.ravel(), cc.ravel()], axis=1))
-    inverse = between(np.asarray(pose_b_in_a, dtype=float), np.zeros(3))
-    from_b = _lookup(values_b, spec_b, transform_points(inverse, centres)).reshape(spec.shape)
+    return overlay(merged, place_grid(values_b, spec_b, pose_b_in_a, spec)), spec
+
+
+def on_finer_cells(
+    values_a: np.ndarray,
+    spec_a: GridSpec,
+    values_b: np.ndarray,
+    spec_b: GridSpec,
+    decision: MergeDecision,
+    params: MergeParams | None = None,
+) -> MergeDecision:
+    """A merge found on coarser cells, searched again on these maps' own cells within a
+    coarse cell and angle step of its pose (exactly there), then refined between cells."""
+    params = params or MergeParams()
+    assert decision.pose is not None
+    points = surface_points(values_b, spec_b, params.point_spacing_m)
+    pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, params.depth)
+    window = SearchWindow.around(
+        decision.pose, points, decision.resolution_m, decision.angle_step_rad
+    )
+    match = best_match(points, pyramid, window)
+    if match is None:
+        return decision
+    fine = replace(
+        decision, pose=match.pose, angle_step_rad=match.angle_step_rad,
+        resolution_m=match.resolution_m,
+    )  # fmt: skip
+    return replace(fine, pose=refined_pose(points, pyramid, fine))
+
+
+def coarsened(values: np.ndarray, spec: GridSpec, factor: int) -> tuple[np.ndarray, GridSpec]:
+    """The map at ``factor`` times its cell size: a coarse cell is occupied if any of its
+    cells is, else free if any is, else unknown (walls kept, as a search needs them)."""
+    rows, cols = -(-spec.rows // factor), -(-spec.cols // factor)
+    padded = np.full((rows * factor, cols * factor), UNKNOWN, dtype=np.int8)
+    padded[: spec.rows, : spec.cols] = values
+    blocks = padded.reshape(rows, factor, cols, factor)
+    coarse = np.where(
+        (blocks == OCCUPIED).any(axis=(1, 3)),
+        OCCUPIED,
+        np.where((blocks == FREE).any(axis=(1, 3)), FREE, UNKNOWN),
+    ).astype(np.int8)
+    return coarse, replace(spec, resolution_m=spec.resolution_m * factor, rows=rows, cols=cols)
+
+
+def place_grid(
+    values: np.ndarray, spec: GridSpec, pose: np.ndarray, target: GridSpec
+) -> np.ndarray:
+    """A grid whose frame lies at ``pose`` in ``target``'s frame, read at each of
+    ``target``'s cell centres (the nearest cell; UNKNOWN off the grid)."""
+    x_m, y_m, theta = between(np.asarray(pose, dtype=float), np.zeros(3))
+    c, s = math.cos(theta), math.sin(theta)
+    # The target's cell centres in the grid's frame, row by column (an affine map).
+    xs = target.origin_x_m + (np.arange(target.cols) + 0.5) * target.resolution_m
+    ys = target.origin_y_m + (np.arange(target.rows) + 0.5) * target.resolution_m
+    frame_x = c * xs[None, :] - s * ys[:, None] + x_m
+    frame_y = s * xs[None, :] + c * ys[:, None] + y_m
+    cols = np.floor((frame_x - spec.origin_x_m) / spec.resolution_m).astype(np.int64)
+    rows = np.floor((frame_y - spec.origin_y_m) / spec.resolution_m).astype(np.int64)
+    inside = (rows >= 0) & (rows < spec.rows) & (cols >= 0) & (cols < spec.cols)
+    placed = np.full(target.shape, UNKNOWN, dtype=np.int8)
+    placed[inside] = np.asarray(values)[rows[inside], cols[inside]]
+    return placed
+
+
+def overlay(values: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Two maps of one grid as one: a cell one left unknown takes the other's value, and
+    where they disagree, occupied wins (what a planner must avoid)."""
+    merged = np.array(values, dtype=np.int8)
     unknown = merged == UNKNOWN
-    merged[unknown] = from_b[unknown]
-    disagree = (~unknown) & (from_b != UNKNOWN) & (from_b != merged)
+    merged[unknown] = other[unknown]
+    disagree = (~unknown) & (other != UNKNOWN) & (other != merged)
     merged[disagree] = OCCUPIED
-    return merged, spec
+    return merged
