@@ -460,6 +460,14 @@ def merge_command(map_a: Path, map_b: Path, out_dir: Path, overwrite: bool) -> N
     "tenth [default: the scenario's algorithms.server.patrol_s, 0].",
 )
 @click.option(
+    "--unknown-starts",
+    is_flag=True,
+    help="The server is not told where the robots start: each robot begins in its own "
+    "frame, and the frames merge where their maps are found to overlap (sets "
+    "robots.relative_starts: unknown; metrics.json's `unknown_starts` judges every merge, "
+    "merges/ shows each).",
+)
+@click.option(
     "--record",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
@@ -486,6 +494,7 @@ def run_command(
     viz: str,
     viz_out: Path | None,
     patrol_s: float | None,
+    unknown_starts: bool,
     record: Path | None,
 ) -> None:
     """Explore a scenario with the full server in the loop and write the run folder."""
@@ -508,6 +517,16 @@ def run_command(
     scenario = scenario.with_algorithms(local_planner=planner, allocator=allocator)
     if patrol_s is not None:
         scenario = scenario.with_patrol(patrol_s)
+    if unknown_starts:
+        scenario = scenario.with_unknown_starts()
+    if distributed:
+        scenario.require_known_starts("--distributed runs")
+    if (viz != "none" or record is not None) and scenario.config.robots.relative_starts == (
+        "unknown"
+    ):
+        raise click.UsageError(
+            "--viz and --record show the team in one frame: not with unknown starts"
+        )
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}"
@@ -1098,7 +1117,8 @@ def experiments_group() -> None:
 
 
 def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
-    """--out, --workers, --executor and --max-time, shared by the experiments commands."""
+    """--out, --workers, --unknown-starts, --executor and --max-time, shared by the
+    experiments commands."""
     function = max_time_option(
         "Simulated seconds per run [default: the grid's, else the scenario's]."
     )(function)
@@ -1114,6 +1134,12 @@ def _sweep_options(function: click.decorators.FC) -> click.decorators.FC:
         default="process",
         show_default=True,
         help="process: a pool of local worker processes; ray: Ray tasks on a cluster.",
+    )(function)
+    function = click.option(
+        "--unknown-starts",
+        is_flag=True,
+        help="Run every scenario without known relative starts (see `acslam run "
+        "--unknown-starts`); run ids and scenario names end in -unknown-starts.",
     )(function)
     function = click.option(
         "--workers",
@@ -1171,6 +1197,7 @@ def experiments_thesis_command(
     max_time_s: float | None,
     seeds: int,
     grid_name: str,
+    unknown_starts: bool,
     **executor: object,
 ) -> None:
     """Reproduce thesis §5.5 (experiments 1-5 with 1-3 robots) and compare algorithms."""
@@ -1178,7 +1205,7 @@ def experiments_thesis_command(
 
     grid = builtin_grid(grid_name)
     check_cells(grid, f"<built-in grid {grid_name}>", seeds=seeds)
-    specs = expand(grid, max_time_s=max_time_s, seeds=seeds)
+    specs = expand(grid, max_time_s=max_time_s, seeds=seeds, unknown_starts=unknown_starts)
     title = f"acslam experiments: {grid_name} grid"
     _sweep_and_summarize(specs, out_dir, overwrite, executor, title)
 
@@ -1187,14 +1214,19 @@ def experiments_thesis_command(
 @click.argument("grid_file", type=click.Path(dir_okay=False, path_type=Path))
 @_sweep_options
 def experiments_grid_command(
-    grid_file: Path, out_dir: Path, overwrite: bool, max_time_s: float | None, **executor: object
+    grid_file: Path,
+    out_dir: Path,
+    overwrite: bool,
+    max_time_s: float | None,
+    unknown_starts: bool,
+    **executor: object,
 ) -> None:
     """Run the grid of a YAML file (scenarios x robots x planners x allocators x seeds)."""
     from acslam.experiments.grid import check_cells, expand, load_grid_file
 
     grid = load_grid_file(grid_file)
     check_cells(grid, str(grid_file))
-    specs = expand(grid, max_time_s=max_time_s)
+    specs = expand(grid, max_time_s=max_time_s, unknown_starts=unknown_starts)
     _sweep_and_summarize(specs, out_dir, overwrite, executor, f"acslam experiments: {grid.name}")
 
 

@@ -167,10 +167,15 @@ class RobotsConfig(Section):
     ``starts``: a list of poses; ``random``, a seeded draw spread over the world, each
     start at least ``min_start_separation_m`` from the others and out of their sight
     (:mod:`acslam.worlds.starts`); or none, the world's suggested starts.
+    ``relative_starts``: ``known``, the server is given the starts; ``unknown``, each
+    robot starts at the origin of its own frame and the server merges the frames from
+    the data (:mod:`acslam.pipeline.frames`; the starts then only place the simulated
+    robots).
     """
 
     count: Annotated[int, Field(ge=1)] | None = None
     starts: list[Pose] | Literal["random"] | None = None
+    relative_starts: Literal["known", "unknown"] = "known"
     min_start_separation_m: PositiveFloat = 3.0
     radius_m: PositiveFloat = 0.105
     max_v_mps: PositiveFloat = 0.22
@@ -489,6 +494,8 @@ class ServerConfig(Section):
     patrol_s: NonNegativeFloat = 0.0
     # The patrol's waypoints cover the free space to within this distance.
     patrol_spacing_m: PositiveFloat = 4.0
+    # With unknown relative starts, the frames' maps are tried for a merge this often.
+    merge_period_s: PositiveFloat = 2.0
 
 
 class ScanMatchingConfig(Section):

@@ -25,6 +25,14 @@ import numpy as np
 
 from acslam import stop
 from acslam.errors import AcslamError
+from acslam.eval.frames import (
+    frame_origins,
+    merge_metrics,
+    placed_poses,
+    world_known,
+    world_values,
+    write_merge_figures,
+)
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
@@ -36,8 +44,10 @@ from acslam.eval.metrics import (
 )
 from acslam.eval.report import RunRecord, write_report
 from acslam.files import write_text, write_yaml
+from acslam.geometry import transform_points
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
+from acslam.pipeline.frames import FramedServer
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
 from acslam.provenance import write_metrics
@@ -94,7 +104,7 @@ def resolved_config(scenario: Scenario) -> dict:
 
 
 def run_loop(
-    server: Server,
+    server: Server | FramedServer,
     source: DataSource,
     log: RunLog,
     *,
@@ -145,9 +155,13 @@ def run_exploration(
     out_dir = start_run_folder(out_dir, scenario)
     config = scenario.config
     sim = scenario.simulator()
-    server = Server(config, scenario.starts, scenario.world.spec)
+    server: Server | FramedServer
+    if config.robots.relative_starts == "unknown":
+        server = FramedServer(config, scenario.robot_count, scenario.world.spec)
+    else:
+        server = Server(config, scenario.starts, scenario.world.spec)
     substeps = max(1, round(config.algorithms.planning.control_period_s / config.sim.dt_s))
-    log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
+    log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress, scenario.starts)
     source = SimulatedSource(sim, substeps)
     reason, wall_time_s = run_loop(
         server, source, log, max_time_s=max_time_s, out_dir=out_dir, on_step=hooks.on_step
@@ -175,11 +189,15 @@ class RunLog:
     """What a run keeps of the server's snapshots: the latest one, every stage's timings
     (``[simulated time, wall seconds]`` each time it ran), every robot's pose as the
     server used it at each step (``[time, x, y, theta]``), and the explored area once per
-    simulated second (reported as progress)."""
+    simulated second (reported as progress).
+
+    With unknown relative starts the server's frames are placed in the world by the
+    robots' true starts (``true_starts``; scoring only, the server never sees them)."""
 
     spec: GridSpec
     last: Snapshot
     on_progress: ProgressHook | None = None
+    true_starts: np.ndarray | None = None
     timings_s: dict[str, list[tuple[float, float]]] = field(
         default_factory=lambda: defaultdict(list)
     )
@@ -196,12 +214,20 @@ class RunLog:
         for stage, seconds in snapshot.timings_s.items():
             self.timings_s[stage].append((snapshot.time_s, seconds))
         poses = np.asarray(snapshot.poses, dtype=float)
+        if snapshot.frames:
+            assert self.true_starts is not None
+            origins = frame_origins(snapshot, self.true_starts)
+            poses = np.vstack([placed_poses(origins[i], pose) for i, pose in enumerate(poses)])
         self.online_poses.append(np.column_stack([np.full(len(poses), snapshot.time_s), poses]))
 
     def sample_explored(self, time_s: float) -> None:
         if time_s < self._next_sample_s:
             return
-        known = self.last.map.known_mask()
+        if self.last.frames:
+            assert self.true_starts is not None
+            known = world_known(self.last, self.true_starts, self.spec)
+        else:
+            known = self.last.map.known_mask()
         self.explored_history.append((time_s, float(known.sum()) * self.spec.resolution_m**2))
         self._next_sample_s += EXPLORED_SAMPLE_PERIOD_S
         if self.on_progress is not None:
@@ -237,6 +263,11 @@ def finish_run(
     metric sections, and ``provenance`` says what produced them. Returns the metrics as
     written: a figure that has no value (no other robot to keep a distance from, a rate
     without cells) is None, JSON's ``null``."""
+    if log.last.frames:
+        names = [robot_name(i) for i in range(scenario.robot_count)]
+        unknown_starts = merge_metrics(log.last, scenario.starts, truth.trajectories, names)
+        extra = {**(extra or {}), "unknown_starts": unknown_starts}
+        write_merge_figures(out_dir, log.last.merges)
     record = _record(scenario, log, truth)
     metrics = _metrics(scenario, log, truth, record, reason, wall_time_s, time_s)
     _write_outputs(out_dir, scenario, record)
@@ -250,18 +281,30 @@ def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
     world = scenario.world
     count = scenario.robot_count
     last = log.last
-    estimated = [last.localization.trajectory(i) for i in range(count)]
+    trajectories = [np.column_stack(last.localization.trajectory(i)) for i in range(count)]
+    landmarks = last.localization.landmarks()
+    if last.frames:  # each frame placed in the world by its first robot's true start
+        origins = frame_origins(last, scenario.starts)
+        trajectories = [
+            np.column_stack([t[:, 0], placed_poses(origins[i], t[:, 1:])])
+            for i, t in enumerate(trajectories)
+        ]
+        landmarks = np.vstack(
+            [_placed_landmarks(origins[v.robot_ids[0]], v.snapshot) for v in last.frames]
+        )
     return RunRecord(
         spec=world.spec,
         true_occupied=world.occupied,
         reachable=world.reachable_free(*scenario.starts[0, :2], scenario.config.robots.radius_m),
-        estimated_values=last.map.occupancy_values(),
-        robot_known=np.stack([last.map.robot_known_mask(i) for i in range(count)]),
-        estimated_trajectories=[np.column_stack([s, p]) for s, p in estimated],
+        estimated_values=world_values(last, scenario.starts, world.spec),
+        robot_known=np.stack(
+            [world_known(last, scenario.starts, world.spec, i) for i in range(count)]
+        ),
+        estimated_trajectories=trajectories,
         true_trajectories=truth_log.trajectories,
         explored_history=np.array(log.explored_history).reshape(-1, 2),
         landmarks_true=scenario.landmarks,
-        landmarks_estimated=last.localization.landmarks(),
+        landmarks_estimated=landmarks,
         stage_names=np.array(list(log.timings_s), dtype=str),
         stage_timings=[np.array(samples).reshape(-1, 2) for samples in log.timings_s.values()],
         control_period_s=scenario.config.algorithms.planning.control_period_s,
@@ -269,6 +312,12 @@ def _record(scenario: Scenario, log: RunLog, truth_log: TruthLog) -> RunRecord:
         if log.online_poses
         else [np.zeros((0, 4)) for _ in range(count)],
     )
+
+
+def _placed_landmarks(origin: np.ndarray, snapshot: Snapshot) -> np.ndarray:
+    """A frame's (M, 3) landmarks, in the world."""
+    landmarks = snapshot.localization.landmarks().reshape(-1, 3)
+    return np.column_stack([transform_points(origin, landmarks[:, :2]), landmarks[:, 2]])
 
 
 def _timing_statistics_ms(samples_ms: np.ndarray) -> dict[str, float]:

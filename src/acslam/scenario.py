@@ -23,6 +23,9 @@ from acslam.worlds.limits import check_world_grid
 from acslam.worlds.starts import draw_random_starts
 from acslam.worlds.world import World
 
+UNKNOWN_STARTS_SUFFIX = "-unknown-starts"
+"""Names a scenario (and a sweep's runs of it) run without known relative starts."""
+
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
@@ -50,6 +53,26 @@ class Scenario:
             config.sim,
             config.seed,
         )
+
+    def with_unknown_starts(self) -> Scenario:
+        """The same scenario with the robots' relative starts unknown to the server
+        (:mod:`acslam.pipeline.frames`), named so that its results stand apart."""
+        robots = self.config.robots.model_copy(update={"relative_starts": "unknown"})
+        name = self.config.name
+        if not name.endswith(UNKNOWN_STARTS_SUFFIX):
+            name += UNKNOWN_STARTS_SUFFIX
+        config = self.config.model_copy(update={"robots": robots, "name": name})
+        return Scenario(config, self.source, self.world, self.starts, self.landmarks)
+
+    def require_known_starts(self, runs: str) -> None:
+        """Refuse unknown relative starts where the server cannot yet merge frames."""
+        if self.config.robots.relative_starts == "unknown":
+            raise ConfigError(
+                self.source,
+                "robots.relative_starts",
+                f"'unknown' runs in process only (acslam run without --distributed, acslam "
+                f"experiments), not in {runs}",
+            )
 
     def with_algorithms(
         self, local_planner: str | None = None, allocator: str | None = None

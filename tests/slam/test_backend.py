@@ -571,3 +571,20 @@ def test_pose_marginal_reused_for_a_few_keyframes_is_never_narrower(monkeypatch,
         # got >= fresh to first order: no direction narrower by more than the estimate's
         # moves since the reused marginal allow (measured: none, to rounding).
         assert scipy.linalg.eigh(got, fresh, eigvals_only=True).min() >= 0.995
+
+
+def test_a_start_placed_by_a_merge_is_held_as_loosely_as_its_sigmas() -> None:
+    """Alone in the graph, a start's marginal is its prior: the config's for a known
+    start, the given sigmas for one a merge of frames placed."""
+    sigmas = np.array([0.1, 0.1, 0.02])
+    backend = SlamBackend(SlamConfig(), {0: np.zeros(3), 1: np.array([2.0, 1.0, 0.5])}, {1: sigmas})
+    backend.update()
+    known = backend.pose_covariance(backend.robot(0))
+    placed = backend.pose_covariance(backend.robot(1))
+    config = SlamConfig()
+    np.testing.assert_allclose(
+        np.sqrt(np.diag(known)),
+        [config.prior_sigma_xy_m, config.prior_sigma_xy_m, config.prior_sigma_theta_rad],
+        rtol=1e-6,
+    )
+    np.testing.assert_allclose(np.sqrt(np.diag(placed)), sigmas, rtol=1e-6)

@@ -66,6 +66,7 @@ def serve(
     """Serve robots on ``listen`` until explored, all lost, or ``max_time_s``; returns
     the metrics written to ``out_dir``."""
     options = options or ServeOptions()
+    scenario.require_known_starts("served runs")
     session = open_session(listen=listen)
     out_dir = start_run_folder(out_dir, scenario)
     count = scenario.robot_count

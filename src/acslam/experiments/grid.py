@@ -36,6 +36,7 @@ from acslam.config import builtin_scenario_names
 from acslam.errors import ConfigError, PluginError
 from acslam.files import read_yaml
 from acslam.pipeline.registry import ALLOCATORS, LOCAL_PLANNERS, Registry
+from acslam.scenario import UNKNOWN_STARTS_SUFFIX
 from acslam.text import plural
 
 DEFAULT_PLANNER = LOCAL_PLANNERS.default
@@ -118,10 +119,11 @@ class RunSpec:
     max_time_s: float | None
     wall_time_limit_s: float | None
     block: str
+    unknown_starts: bool = False
 
     def key(self) -> dict[str, Any]:
         """What defines the run's result (not the block that asked for it)."""
-        return {
+        key = {
             "scenario": self.scenario,
             "robots": self.robots,
             "planner": self.planner,
@@ -129,6 +131,7 @@ class RunSpec:
             "seed": self.seed,
             "max_time_s": self.max_time_s,
         }
+        return {**key, "unknown_starts": True} if self.unknown_starts else key
 
 
 def run_id(scenario: str, robots: int, planner: str, allocator: str, seed: int) -> str:
@@ -218,9 +221,13 @@ def builtin_grid(name: str) -> ExperimentGrid:
 
 
 def expand(
-    grid: ExperimentGrid, max_time_s: float | None = None, seeds: int | None = None
+    grid: ExperimentGrid,
+    max_time_s: float | None = None,
+    seeds: int | None = None,
+    unknown_starts: bool = False,
 ) -> list[RunSpec]:
-    """Every run of the grid once, in block order; ``max_time_s``/``seeds`` override."""
+    """Every run of the grid once, in block order; ``max_time_s``/``seeds`` override;
+    ``unknown_starts``: every run without known relative starts (its id says so)."""
     limit = max_time_s if max_time_s is not None else grid.max_time_s
     specs: dict[str, RunSpec] = {}
     for b, block in enumerate(grid.blocks):
@@ -231,6 +238,7 @@ def expand(
                     for allocator in block.allocators:
                         for seed in seed_list:
                             rid = run_id(scenario, robots, planner, allocator, seed)
+                            rid += UNKNOWN_STARTS_SUFFIX if unknown_starts else ""
                             spec = RunSpec(
                                 rid,
                                 scenario,
@@ -241,6 +249,7 @@ def expand(
                                 limit,
                                 grid.wall_time_limit_s,
                                 block.name or f"block {b}",
+                                unknown_starts,
                             )
                             known = specs.get(rid)
                             if known is not None and known.scenario != scenario:

@@ -87,6 +87,8 @@ def execute_run(spec: RunSpec, folder: Path) -> RunResult:
     try:
         scenario = load_scenario(spec.scenario, robots=spec.robots, seed=spec.seed)
         scenario = scenario.with_algorithms(spec.planner, spec.allocator)
+        if spec.unknown_starts:
+            scenario = scenario.with_unknown_starts()
         limit_s = spec.max_time_s or scenario.config.sim.max_time_s
         metrics = run_exploration(scenario, folder, limit_s, hooks=RunHooks(on_progress=guard))
     except Exception as exc:  # a worker must report, not die: the sweep goes on

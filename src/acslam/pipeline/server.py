@@ -44,7 +44,7 @@ from acslam.exploration.frontiers import away_from_robots
 from acslam.exploration.patrol import Patrol
 from acslam.grid import FREE, GridSpec, Window
 from acslam.mapping.costmap import Costmap, CostmapUpdater, known_window
-from acslam.messages import RobotMessage, VelocityCommand
+from acslam.messages import LidarScan, RobotMessage, VelocityCommand
 from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.perception import KeptScan, Perception
 from acslam.pipeline.registry import (
@@ -58,11 +58,16 @@ from acslam.pipeline.registry import (
 )
 from acslam.pipeline.snapshot import LocalizationView, MapView, Snapshot
 from acslam.planning.astar import lookahead_point, remaining_length_m
-from acslam.planning.field import DistanceField, RobotState
+from acslam.planning.field import DistanceField, ObstacleField, RobotState
 from acslam.planning.recovery import Recovery, penalize
 from acslam.schedule import Periodic, is_due
 
 TEAM_FRAME = "map"
+UNEXPLAINED_M = 0.1
+"""A scan return this far from the map's obstacles is one the map does not explain."""
+MOVING_OBJECT_RETURNS = 3
+"""Returns in the map's free space that show something moved in (a robot 0.21 m across
+gives 3 or more at 1 degree within 4 m)."""
 MAP_LANE = "map"
 """Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
 DECISION_LANE = "decisions"
@@ -154,10 +159,16 @@ class Server:
         starts: np.ndarray,
         map_spec: GridSpec,
         jobs: Jobs | None = None,
+        scan_obstacles: bool = False,
+        start_sigmas: dict[int, np.ndarray] | None = None,
     ) -> None:
         """``jobs``: where mapping, the map update, the decisions and loop-closure
         matching run (in the cycle that schedules them unless given, see
-        :mod:`acslam.pipeline.jobs`)."""
+        :mod:`acslam.pipeline.jobs`). ``scan_obstacles``: lay each robot's latest scan's
+        returns that the map does not explain over the local planners' field, for a team
+        that may meet robots it does not know (:mod:`acslam.pipeline.frames`).
+        ``start_sigmas``: by robot, ``[x, y, theta]`` sigmas of a start known only as well
+        as a merge of frames placed it (the localizer's ``start_sigmas``)."""
         self._config = config
         self._jobs: Jobs = InlineJobs() if jobs is None else jobs
         algorithms = config.algorithms
@@ -168,6 +179,7 @@ class Server:
             scan_matching=algorithms.scan_matching,
             starts={i: np.asarray(s) for i, s in enumerate(starts)},
             jobs=self._jobs,
+            **({} if start_sigmas is None else {"start_sigmas": start_sigmas}),
         )
         reach_m = config.robots.radius_m + algorithms.server.robot_filter_margin_m
         self._perception = Perception(
@@ -210,6 +222,8 @@ class Server:
         self._explored_s: float | None = None
         self._patrol: Patrol | None = None
         self._lost: dict[int, float] = {}
+        self._scan_obstacles = scan_obstacles
+        self._latest_scans: dict[int, tuple[np.ndarray, LidarScan]] = {}
 
     def mark_lost(self, robot_id: int, now_s: float) -> None:
         """Give up on a robot that stopped answering (e.g. heartbeat timeout).
@@ -273,6 +287,10 @@ class Server:
         map_update_due = self._map_updates.due(now_s)
         with self._timed("slam"):
             scans = self._perception.localize(messages, now_s).scans
+        if self._scan_obstacles:
+            for kept in scans:
+                pose = self._localizer.scan_pose(kept.index)
+                self._latest_scans[kept.mappable.robot_id] = (pose, kept.mappable)
         self._integrate(scans)
         self._take_mapping()
         if map_update_due and self._map_job is None:
@@ -289,6 +307,54 @@ class Server:
         self._take_decisions(now_s)
         with self._timed("local_planning"):
             return self._local_plan(poses, now_s)
+
+    def catch_up(self, messages: Iterable[RobotMessage], now_s: float) -> None:
+        """Localize and map messages its robots sent before this server existed, in the
+        cycles they arrived in, deciding nothing (a merged frame,
+        :mod:`acslam.pipeline.frames`; its merge's time counts this work)."""
+        self._integrate(self._perception.localize(messages, now_s).scans)
+        while self._mapping_jobs:
+            self._mapping_jobs.popleft().result()
+
+    def latest_scan(self, robot_id: int) -> tuple[np.ndarray, LidarScan] | None:
+        """The robot's latest scan (its mappable beams: known teammates' left out) and its
+        sensor pose; kept only with ``scan_obstacles``."""
+        return self._latest_scans.get(robot_id)
+
+    def sees_moving_object(self) -> bool:
+        """Whether a robot's latest scan ends where the map was seen free, away from its
+        obstacles: a robot this server does not know, or anything else that moved in
+        (``scan_obstacles`` only)."""
+        if self._values is None or self._field is None or not self._latest_scans:
+            return False
+        points = self._returns_within_reach()
+        cells = self._map_spec.world_to_cell(points)
+        inside = self._map_spec.contains(cells)
+        in_free = np.zeros(len(points), dtype=bool)
+        in_free[inside] = self._values[cells[inside, 0], cells[inside, 1]] == FREE
+        clear = self._field.value(points) > UNEXPLAINED_M
+        return np.count_nonzero(in_free & clear) >= MOVING_OBJECT_RETURNS
+
+    def _returns_within_reach(self) -> np.ndarray:
+        """(K, 2) returns of the robots' latest scans within the local planners' reach."""
+        planning = self._config.algorithms.planning
+        reach_m = planning.horizon_s * self._config.robots.max_v_mps + planning.obstacle_influence_m
+        returns = []
+        for pose, scan in self._latest_scans.values():
+            near = scan.ranges < reach_m
+            angles = scan.angles[near] + pose[2]
+            returns.append(
+                pose[:2]
+                + scan.ranges[near, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+            )
+        return np.vstack(returns).reshape(-1, 2)
+
+    def _unexplained_returns(self, field: DistanceField) -> np.ndarray:
+        """(K, 2) returns of the robots' latest scans within the local planners' reach
+        that stand off the map's obstacles: something the map update has not caught up
+        with (returns on the map's walls change no clearance)."""
+        points = self._returns_within_reach()
+        return points[field.value(points) > UNEXPLAINED_M]
 
     def close(self) -> None:
         """End the run: wait for every job scheduled so far."""
@@ -577,6 +643,8 @@ class Server:
             if step.command is not None:
                 overrides[i] = step.command
             goals[i] = lookahead_point(task.path_m, state.xy_m, reach_m)
+        if self._scan_obstacles and self._latest_scans:
+            field = ObstacleField(field, self._unexplained_returns(field))
         planned = self._local_planner.plan(states, goals, field)
         commands = [overrides.get(i, (float(v), float(w))) for i, (v, w) in enumerate(planned)]
         for i in self._lost:

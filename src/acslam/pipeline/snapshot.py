@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -18,7 +19,10 @@ from acslam.exploration.clustering import FrontierCluster
 from acslam.grid import Window
 from acslam.mapping.costmap import Costmap
 from acslam.messages import VelocityCommand
-from acslam.pipeline.stages import Localizer, Mapper
+from acslam.pipeline.stages import Mapper
+
+if TYPE_CHECKING:
+    from acslam.pipeline.frames import FrameMerge, FrameView
 
 
 @dataclass(frozen=True)
@@ -39,11 +43,20 @@ class MapView:
         return self._mapper.robot_known_mask(robot_id)
 
 
+class Estimates(Protocol):
+    """What a localization view reads: a localizer, or the frames of a team with unknown
+    starts."""
+
+    def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def landmarks(self) -> np.ndarray: ...
+
+
 @dataclass(frozen=True)
 class LocalizationView:
     """The estimated trajectories and landmarks."""
 
-    _localizer: Localizer
+    _localizer: Estimates
 
     def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
         """Stamps (N,) and poses (N, 3)."""
@@ -66,6 +79,11 @@ class Snapshot:
     stage that ran in this step, and of the whole ``cycle``. ``explored_s``: when the team
     had nothing left to explore (None before); ``finished`` follows it, or the end of the
     patrol after it (``ServerConfig.patrol_s``).
+
+    With unknown relative starts (:mod:`acslam.pipeline.frames`), ``map``, ``costmap``,
+    ``window``, ``frontier_cells`` and ``clusters`` are those of robot 0's frame;
+    ``frames`` holds every frame and ``merges`` every merge so far (both empty when the
+    team shares one frame from the start).
     """
 
     time_s: float
@@ -86,3 +104,5 @@ class Snapshot:
     finished: bool
     explored_s: float | None
     timings_s: Mapping[str, float]
+    frames: tuple[FrameView, ...] = ()
+    merges: tuple[FrameMerge, ...] = ()

@@ -78,3 +78,31 @@ class DistanceField:
         ddx = ((1 - fr) * (d01 - d00) + fr * (d11 - d10)) / g.resolution_m * inside_x
         ddy = ((1 - fc) * (d10 - d00) + fc * (d11 - d01)) / g.resolution_m * inside_y
         return value, np.stack([ddx, ddy], axis=-1)
+
+
+class ObstacleField(DistanceField):
+    """A distance field with obstacle points laid over it: the latest scans' returns that
+    the map does not explain (a robot the server does not know, anything standing where
+    the map is free), before the map update holds them."""
+
+    def __init__(self, base: DistanceField, points_m: np.ndarray) -> None:
+        self.distance_m = base.distance_m
+        self.grid = base.grid
+        self.points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
+
+    def value(self, xy_m: np.ndarray) -> np.ndarray:
+        return self.value_and_gradient(xy_m)[0]
+
+    def value_and_gradient(self, xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        xy_m = np.asarray(xy_m, dtype=float)
+        value, gradient = super().value_and_gradient(xy_m)
+        if len(self.points_m) == 0:
+            return value, gradient
+        offsets = xy_m[..., None, :] - self.points_m
+        gaps = np.linalg.norm(offsets, axis=-1)
+        nearest = np.argmin(gaps, axis=-1)
+        gap = np.take_along_axis(gaps, nearest[..., None], axis=-1)[..., 0]
+        offset = np.take_along_axis(offsets, nearest[..., None, None], axis=-2)[..., 0, :]
+        closer = gap < value
+        direction = offset / np.maximum(gap, 1e-9)[..., None]
+        return np.where(closer, gap, value), np.where(closer[..., None], direction, gradient)

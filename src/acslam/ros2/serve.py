@@ -70,6 +70,7 @@ def serve_ros2(
 ) -> dict:
     """Serve ROS 2 robots until explored, all lost, or ``max_time_s``; returns the
     metrics written to ``out_dir``."""
+    scenario.require_known_starts("ROS 2 served runs")
     out_dir = runner.start_run_folder(out_dir, scenario)
     sessions, nodes = _open_nodes(options)
     try:

@@ -82,7 +82,14 @@ def _planar_covariance(body_cov: np.ndarray, theta_rad: float) -> np.ndarray:
 class SlamBackend:
     """One iSAM2 for the whole team. Feed messages, call :meth:`update`, query the estimate."""
 
-    def __init__(self, config: SlamConfig, starts: dict[int, np.ndarray]) -> None:
+    def __init__(
+        self,
+        config: SlamConfig,
+        starts: dict[int, np.ndarray],
+        start_sigmas: dict[int, np.ndarray] | None = None,
+    ) -> None:
+        """``start_sigmas``: ``[x, y, theta]`` sigmas of a start known less well than the
+        config's prior (a robot placed by a merge of frames), by robot id."""
         if not starts:
             raise ValueError("SlamBackend needs the start pose of at least one robot")
         self.config = config
@@ -130,9 +137,13 @@ class SlamBackend:
             self._robots[int(robot_id)] = _Robot(
                 int(robot_id), [key], [float("nan")], calibration=calibration
             )
-            self._graph.add(
-                gtsam.PriorFactorPose2(key, planar_to_pose2(start), prior_noise(config))
+            sigmas = (start_sigmas or {}).get(int(robot_id))
+            noise = (
+                prior_noise(config)
+                if sigmas is None
+                else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
             )
+            self._graph.add(gtsam.PriorFactorPose2(key, planar_to_pose2(start), noise))
             self._initial.insert(key, planar_to_pose2(start))
             self._coverage.add(int(robot_id), float(start[0]), float(start[1]), 0.0)
 

@@ -40,9 +40,11 @@ class Isam2Localizer:
         scan_matching: ScanMatchingConfig,
         starts: dict[int, np.ndarray],
         jobs: Jobs | None = None,
+        start_sigmas: dict[int, np.ndarray] | None = None,
     ) -> None:
-        """``jobs``: where loop-closure matching runs (at once unless given)."""
-        self.backend = SlamBackend(params, starts)
+        """``jobs``: where loop-closure matching runs (at once unless given);
+        ``start_sigmas``: see :class:`SlamBackend`."""
+        self.backend = SlamBackend(params, starts, start_sigmas)
         self.scan_matcher = LidarConstraints(scan_matching)
         self._jobs: Jobs = InlineJobs() if jobs is None else jobs
         self._loop_job: Future[list[LoopMatch]] | None = None

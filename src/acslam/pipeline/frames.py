@@ -1,0 +1,510 @@
+"""Robots whose relative start poses are unknown (``robots.relative_starts: unknown``): one
+frame per robot until the data places them, then one frame for the robots merged.
+
+Each robot starts at the origin of its own frame, and nothing tells the server where that
+frame lies. Until it is merged, a robot has a server of its own
+(:class:`~acslam.pipeline.server.Server`): its SLAM, its map, its frontiers and its plans.
+Every ``merge_period_s`` each pair of frames whose maps grew by ``SEARCH_AGAIN_GROWTH``
+since their last search is searched (:func:`~acslam.mapping.merge.find_merge`: one
+frame's walls over the whole of the other's map at every heading, accepted only when
+verified). A wrong merge is worse than a late one, and one room can look just like
+another: two robots that each saw one room of a dungeon matched the rooms 13 m apart. So
+a match is a candidate until what the walls cannot tell bears it out:
+
+- the robots' LiDARs see each other (:func:`sighting`): where the match puts a robot of
+  the other frame in a robot's view, a small object must stand. A scan that runs through
+  that place refutes the match, one that ends on it confirms it;
+- or, with no robot in view, a later search finds the same pose (within ``SAME_POSE_M``
+  and ``SAME_POSE_RAD``) with ``CONFIRMING_POINTS`` more of the walls matched: walls a
+  wrong pose lays over the other map's unknown space match nothing, so only a right pose
+  keeps gaining.
+
+A merge refines the pose (on the maps' own cells, then by two robots' scans) and builds
+one server for both frames' robots, in the frame of the lower robot id: the other frame's
+starts carried through the pose, and every message its robots sent replayed into the new
+server's SLAM and map (:meth:`~acslam.pipeline.server.Server.catch_up`), so the merged
+frame holds what a run with those starts would have made. Allocation and planning then
+split the frontiers between the merged robots and keep them apart.
+
+Each frame's grid is a square about its origin, twice the diagonal of the deployment's
+map extent wide: wherever in that extent a robot started and whichever way it faced, its
+frame's grid holds the whole building, so no guess of where it is was needed.
+
+A robot of another frame is unknown to a frame's server: the returns of its robots' latest
+scans that the map does not explain are obstacles to their local planner
+(``scan_obstacles``), refreshed with every scan.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+
+import numpy as np
+
+from acslam.config import ScenarioConfig
+from acslam.geometry import between, compose, transform_points, wrap_angle, wrap_angles
+from acslam.grid import UNKNOWN, GridSpec
+from acslam.mapping.costmap import known_window
+from acslam.mapping.merge import MergeDecision, coarsened, find_merge, on_finer_cells
+from acslam.mapping.scan_matching import match_scans, prepare_scan, scan_points
+from acslam.messages import LidarScan, RobotMessage, VelocityCommand
+from acslam.pipeline.server import Server
+from acslam.pipeline.snapshot import LocalizationView, Snapshot
+from acslam.schedule import Periodic
+
+SEARCH_RESOLUTION_M = 0.1
+"""Frames are searched for a merge on 0.1 m cells: a search of two floor-plan maps on
+0.05 m cells took 0.43 s per branch and bound, and a merge's pose is refined after
+(between the search's cells, then by two robots' scans)."""
+SEARCH_AGAIN_GROWTH = 0.15
+"""A pair of frames is searched again once either map knows this share more cells: a
+search of two dungeon maps of 100 m^2 costs up to 7 s (most of it passing over poses
+that put walls in free space), and little new evidence changes little."""
+SEEN_SEARCH_PERIOD_S = 6.0
+"""While a robot sees something moving, its frame's pairs are searched this often."""
+CONFIRMING_POINTS = 100
+"""A candidate merge is confirmed by a try at the same pose with this many more of the
+merged frame's wall points matched (10 m more of wall at the points' 0.1 m spacing)."""
+MERGED_START_SIGMAS = np.array([0.1, 0.1, 0.02])
+"""``[x, y, theta]`` sigmas (m, rad) of a start a merge placed. The merge fits the two
+maps where they overlap, after the merged robot drifted on its own; a start held as
+firmly as a known one keeps that drift in its early trajectory."""
+SAME_POSE_M = 0.3
+SAME_POSE_RAD = math.radians(5.0)
+"""Two tries found the same pose when they differ by less than this."""
+
+
+def frame_name(base_robot_id: int) -> str:
+    """A frame is named after the robot at its origin."""
+    return f"robot_{base_robot_id}/map"
+
+
+def frame_grid_spec(extent: GridSpec) -> GridSpec:
+    """A square grid about a frame's origin that holds ``extent`` whatever pose in it the
+    origin has: half as wide as ``extent``'s diagonal, on each side."""
+    half_cells = math.ceil(math.hypot(extent.width_m, extent.height_m) / extent.resolution_m)
+    corner_m = -half_cells * extent.resolution_m  # the origin on a cell corner
+    return GridSpec(corner_m, corner_m, extent.resolution_m, 2 * half_cells, 2 * half_cells)
+
+
+@dataclass(frozen=True)
+class FrameView:
+    """One frame as of a snapshot: its robots (global ids; the first stands at its
+    origin), their start poses in it, its grid and its server's snapshot (which numbers
+    the robots ``0..k-1`` in the order of ``robot_ids``)."""
+
+    name: str
+    robot_ids: tuple[int, ...]
+    starts: np.ndarray
+    spec: GridSpec
+    snapshot: Snapshot
+
+
+@dataclass(frozen=True)
+class FrameMerge:
+    """A merge: at ``time_s``, the frame of robots ``merged_robot_ids`` was found at
+    ``decision.pose`` in the frame of robots ``into_robot_ids`` (each frame's first robot
+    stands at its origin), when those robots stood at ``merged_poses`` in their frame. The
+    maps before (cropped to what each knew) and the merged map after are kept for the
+    report."""
+
+    time_s: float
+    into_robot_ids: tuple[int, ...]
+    merged_robot_ids: tuple[int, ...]
+    decision: MergeDecision
+    merged_poses: np.ndarray
+    before: tuple[tuple[np.ndarray, GridSpec], tuple[np.ndarray, GridSpec]]
+    after: tuple[np.ndarray, GridSpec]
+
+
+@dataclass
+class _Frame:
+    """A frame's robots, their starts in it, its server, and every message its robots
+    sent, cycle by cycle (robot ids as sent), for the server a merge builds."""
+
+    robot_ids: tuple[int, ...]
+    starts: np.ndarray
+    placed: frozenset[int]
+    server: Server
+    history: list[tuple[float, list[RobotMessage]]] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return frame_name(self.robot_ids[0])
+
+    def to_local(self, message: RobotMessage) -> RobotMessage:
+        return replace(message, robot_id=self.robot_ids.index(message.robot_id))
+
+
+def _known_part(snapshot: Snapshot, spec: GridSpec) -> tuple[np.ndarray, GridSpec]:
+    """The frame's map cropped to its known cells (a copy)."""
+    values = snapshot.map.occupancy_values()
+    window = known_window(values, spec, 0.0)
+    return np.array(window.crop(values)), window.spec
+
+
+def _search_grid(known: tuple[np.ndarray, GridSpec]) -> tuple[np.ndarray, GridSpec]:
+    """The map as the merge search reads it: at ``SEARCH_RESOLUTION_M`` or its own cells,
+    whichever is coarser."""
+    values, spec = known
+    factor = max(1, round(SEARCH_RESOLUTION_M / spec.resolution_m))
+    return coarsened(values, spec, factor) if factor > 1 else known
+
+
+class _TeamLocalization:
+    """The trajectories of all robots, each in its frame, and every frame's landmarks."""
+
+    def __init__(self, frames: Sequence[FrameView]) -> None:
+        self._frames = frames
+
+    def trajectory(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
+        for frame in self._frames:
+            if robot_id in frame.robot_ids:
+                local = frame.robot_ids.index(robot_id)
+                return frame.snapshot.localization.trajectory(local)
+        raise KeyError(robot_id)
+
+    def landmarks(self) -> np.ndarray:
+        return np.vstack([f.snapshot.localization.landmarks() for f in self._frames])
+
+
+class FramedServer:
+    """The server for a team with unknown relative starts: a frame per robot, merged as
+    the data allows (see the module's docstring)."""
+
+    def __init__(self, config: ScenarioConfig, robot_count: int, extent: GridSpec) -> None:
+        """``extent``: the deployment's map extent (only its size is used: the frames'
+        grids are squares about their origins that hold it)."""
+        self._config = config
+        self._spec = frame_grid_spec(extent)
+        self._frames = [
+            self._new_frame((i,), np.zeros((1, 3)), frozenset()) for i in range(robot_count)
+        ]
+        self._robot_count = robot_count
+        self._lost: dict[int, float] = {}
+        self._merges: list[FrameMerge] = []
+        self._merge_tries = Periodic(config.algorithms.server.merge_period_s)
+        # Per pair of frames, the known cells of each map when last searched and when,
+        # and the candidate merge awaiting confirmation.
+        self._searched: dict[tuple[str, str], tuple[tuple[int, int], float]] = {}
+        self._candidates: dict[tuple[str, str], MergeDecision] = {}
+        self._snapshots = [frame.server.snapshot(0.0) for frame in self._frames]
+        self._timings_s: dict[str, float] = {}
+
+    def _new_frame(
+        self, robot_ids: tuple[int, ...], starts: np.ndarray, placed: frozenset[int]
+    ) -> _Frame:
+        """``placed``: the robots whose starts a merge placed (held as loosely as
+        ``MERGED_START_SIGMAS``)."""
+        sigmas = {robot_ids.index(r): MERGED_START_SIGMAS for r in placed}
+        server = Server(self._config, starts, self._spec, scan_obstacles=True, start_sigmas=sigmas)
+        return _Frame(robot_ids, starts, placed, server)
+
+    def _frame_of(self, robot_id: int) -> _Frame:
+        return next(f for f in self._frames if robot_id in f.robot_ids)
+
+    def mark_lost(self, robot_id: int, now_s: float) -> None:
+        """See :meth:`Server.mark_lost`."""
+        self._lost.setdefault(robot_id, now_s)
+        frame = self._frame_of(robot_id)
+        frame.server.mark_lost(frame.robot_ids.index(robot_id), now_s)
+
+    def close(self) -> None:
+        for frame in self._frames:
+            frame.server.close()
+
+    def step(self, messages: Iterable[RobotMessage], now_s: float) -> Snapshot:
+        """Merge what the maps so far allow, then run each frame's server on its robots'
+        messages."""
+        self._timings_s = {}
+        start = time.perf_counter()
+        if self._merge_tries.due(now_s):
+            merge_start = time.perf_counter()
+            self._merge(now_s)
+            self._timings_s["merge"] = time.perf_counter() - merge_start
+        by_frame: dict[str, list[RobotMessage]] = {f.name: [] for f in self._frames}
+        for message in messages:
+            by_frame[self._frame_of(message.robot_id).name].append(message)
+        self._snapshots = []
+        for frame in self._frames:
+            received = by_frame[frame.name]
+            if len(self._frames) > 1:  # a frame alone will never be merged again
+                frame.history.append((now_s, received))
+            snapshot = frame.server.step([frame.to_local(m) for m in received], now_s)
+            self._snapshots.append(snapshot)
+            for stage, seconds in snapshot.timings_s.items():
+                self._timings_s[stage] = self._timings_s.get(stage, 0.0) + seconds
+        self._timings_s["cycle"] = time.perf_counter() - start
+        return self.snapshot(now_s)
+
+    # ------------------------------------------------------------------ merging
+
+    def _merge(self, now_s: float) -> None:
+        """Look at every pair of frames: a candidate merge the robots now see each other
+        by is taken; a pair whose maps grew by ``SEARCH_AGAIN_GROWTH`` since it was last
+        searched is searched again. The first merge taken ends the look (the frames
+        change; the rest wait for the next)."""
+        known = [_known_part(s, self._spec) for s in self._snapshots]
+        sizes = [int(np.count_nonzero(values != UNKNOWN)) for values, _ in known]
+        seeing = [frame.server.sees_moving_object() for frame in self._frames]
+        for a in range(len(self._frames)):
+            for b in range(a + 1, len(self._frames)):
+                pair = (self._frames[a].name, self._frames[b].name)
+                candidate = self._candidates.get(pair)
+                if candidate is not None:
+                    seen, missed = self._sightings(a, b, candidate)
+                    if missed:
+                        del self._candidates[pair]
+                    elif seen:
+                        self._join(a, b, candidate, now_s, (known[a], known[b]))
+                        return
+                if not self._search_due(pair, (sizes[a], sizes[b]), seeing[a] or seeing[b], now_s):
+                    continue
+                self._searched[pair] = ((sizes[a], sizes[b]), now_s)
+                decision = find_merge(*_search_grid(known[a]), *_search_grid(known[b]))
+                seen, missed = (0, 0) if not decision.accepted else self._sightings(a, b, decision)
+                if not decision.accepted or missed:
+                    self._candidates.pop(pair, None)
+                elif seen or self._confirms(self._candidates.get(pair), decision):
+                    self._join(a, b, decision, now_s, (known[a], known[b]))
+                    return
+                elif not _same_pose(self._candidates.get(pair), decision):
+                    self._candidates[pair] = decision
+
+    def _search_due(
+        self, pair: tuple[str, str], sizes: tuple[int, int], seeing: bool, now_s: float
+    ) -> bool:
+        """A pair is searched again once either map grew by ``SEARCH_AGAIN_GROWTH``, or
+        every ``SEEN_SEARCH_PERIOD_S`` while one of its robots sees something moving where
+        its map is free (perhaps a robot of the other frame: a match then can be borne
+        out by a sighting at once)."""
+        last = self._searched.get(pair)
+        if last is None:
+            return True
+        before, searched_s = last
+        grown = any(
+            size >= (1 + SEARCH_AGAIN_GROWTH) * known
+            for size, known in zip(sizes, before, strict=True)
+        )
+        return grown or (seeing and now_s - searched_s >= SEEN_SEARCH_PERIOD_S)
+
+    def _sightings(self, a: int, b: int, decision: MergeDecision) -> tuple[int, int]:
+        """How many of the two frames' robots, placed by the match, the other frame's
+        latest scans show where the match puts them, and how many they look through."""
+        assert decision.pose is not None
+        pose_b_in_a = decision.pose
+        pose_a_in_b = between(pose_b_in_a, np.zeros(3))
+        radius_m = self._config.robots.radius_m
+        votes = []
+        for viewers, targets, placed in ((a, b, pose_b_in_a), (b, a, pose_a_in_b)):
+            viewer_frame, target_snapshot = self._frames[viewers], self._snapshots[targets]
+            target_xy = transform_points(placed, np.asarray(target_snapshot.poses)[:, :2])
+            for local in range(len(viewer_frame.robot_ids)):
+                latest = viewer_frame.server.latest_scan(local)
+                if latest is not None:
+                    votes += [sighting(*latest, xy, radius_m) for xy in target_xy]
+        return votes.count(True), votes.count(False)
+
+    def _scan_refined(self, a: int, b: int, pose_b_in_a: np.ndarray) -> np.ndarray:
+        """The merge's pose from the latest scans of the two robots (one of each frame)
+        that the merge puts nearest each other, matched to each other, when they agree
+        well: two scans fit to about a centimetre, where two maps fit each other to a
+        cell or two, and a frame merged that far off pulls its robots' trajectories after
+        it (thesis-exp1, two robots: 4.7 cm off left 6 cm of error, 1.1 cm off 1.2 cm,
+        where known starts leave 0.6 cm). A robot's scan fitted to the other frame's map
+        instead did worse (3.5 cm): the map's walls are cells."""
+        config = self._config.algorithms.scan_matching
+        best: tuple[float, np.ndarray, LidarScan, np.ndarray, LidarScan] | None = None
+        for local_a in range(len(self._frames[a].robot_ids)):
+            for local_b in range(len(self._frames[b].robot_ids)):
+                scan_a = self._frames[a].server.latest_scan(local_a)
+                scan_b = self._frames[b].server.latest_scan(local_b)
+                if scan_a is None or scan_b is None:
+                    continue
+                placed_b = compose(pose_b_in_a, scan_b[0])
+                gap_m = float(np.hypot(*(placed_b[:2] - scan_a[0][:2])))
+                if best is None or gap_m < best[0]:
+                    best = (gap_m, scan_a[0], scan_a[1], placed_b, scan_b[1])
+        if best is None:
+            return pose_b_in_a
+        _, sensor_a, scan_a, placed_b, scan_b = best
+        guess = between(sensor_a, placed_b)
+        result = match_scans(
+            prepare_scan(scan_a.angles, scan_a.ranges, config),
+            scan_points(scan_b.angles, scan_b.ranges, config),
+            guess,
+            config,
+        )
+        shift = result.relative - guess
+        if not (
+            result.converged
+            and result.inlier_ratio >= SCAN_REFINE_MIN_INLIERS
+            and np.hypot(shift[0], shift[1]) < SAME_POSE_M
+            and abs(wrap_angle(shift[2])) < SAME_POSE_RAD
+        ):
+            return pose_b_in_a
+        # B's frame in A's: A's sensor, the matched offset, back from B's sensor in B.
+        sensor_b = between(pose_b_in_a, placed_b)
+        return compose(compose(sensor_a, result.relative), between(sensor_b, np.zeros(3)))
+
+    @staticmethod
+    def _confirms(candidate: MergeDecision | None, decision: MergeDecision) -> bool:
+        if candidate is None or not _same_pose(candidate, decision):
+            return False
+        return decision.matched_points - candidate.matched_points >= CONFIRMING_POINTS
+
+    def _join(
+        self,
+        a: int,
+        b: int,
+        decision: MergeDecision,
+        now_s: float,
+        before: tuple[tuple[np.ndarray, GridSpec], tuple[np.ndarray, GridSpec]],
+    ) -> None:
+        """One server for frames ``a`` and ``b`` in ``a``'s frame, fed every message
+        their robots sent."""
+        assert decision.pose is not None
+        if decision.resolution_m > before[0][1].resolution_m:
+            decision = on_finer_cells(*before[0], *before[1], decision)
+        decision = replace(decision, pose=self._scan_refined(a, b, decision.pose))
+        first, second = self._frames[a], self._frames[b]
+        merged_poses = np.array(self._snapshots[b].poses)
+        starts = {r: s for r, s in zip(first.robot_ids, first.starts, strict=True)}
+        for robot_id, start in zip(second.robot_ids, second.starts, strict=True):
+            starts[robot_id] = compose(decision.pose, start)
+        robot_ids = tuple(sorted(starts))
+        placed = first.placed | set(second.robot_ids)
+        merged = self._new_frame(robot_ids, np.array([starts[r] for r in robot_ids]), placed)
+        for (time_s, sent_a), (_, sent_b) in zip(first.history, second.history, strict=True):
+            received = sent_a + sent_b
+            merged.history.append((time_s, received))
+            merged.server.catch_up([merged.to_local(m) for m in received], time_s)
+        for robot_id, lost_s in self._lost.items():
+            if robot_id in robot_ids:
+                merged.server.mark_lost(robot_ids.index(robot_id), lost_s)
+        self._frames[a] = merged
+        del self._frames[b]
+        # Frame a keeps its name and coordinates; what was found about frame b is gone.
+        for table in (self._searched, self._candidates):
+            for pair in [p for p in table if second.name in p]:
+                del table[pair]
+        if len(self._frames) == 1:
+            merged.history.clear()
+        self._snapshots[a] = merged.server.snapshot(now_s)
+        del self._snapshots[b]
+        after = _known_part(self._snapshots[a], self._spec)
+        self._merges.append(
+            FrameMerge(
+                now_s, first.robot_ids, second.robot_ids, decision, merged_poses, before, after
+            )
+        )
+
+    # ------------------------------------------------------------------ snapshot
+
+    def snapshot(self, now_s: float) -> Snapshot:
+        """The team's state: per robot, its pose, goal and path in its frame
+        (``robot_frames``); the map, costmap and frontiers of robot 0's frame; every
+        frame in ``frames``, every merge so far in ``merges``."""
+        n = self._robot_count
+        views = tuple(
+            FrameView(f.name, f.robot_ids, f.starts, self._spec, s)
+            for f, s in zip(self._frames, self._snapshots, strict=True)
+        )
+        poses = np.zeros((n, 3))
+        robot_frames = [""] * n
+        goals: list[np.ndarray | None] = [None] * n
+        paths: list[np.ndarray | None] = [None] * n
+        idle: list[float | None] = [None] * n
+        stuck = [0] * n
+        commands = []
+        for view in views:
+            snap = view.snapshot
+            for local, robot_id in enumerate(view.robot_ids):
+                poses[robot_id] = snap.poses[local]
+                robot_frames[robot_id] = view.name
+                goals[robot_id], paths[robot_id] = snap.goals_m[local], snap.paths_m[local]
+                idle[robot_id], stuck[robot_id] = snap.idle_since_s[local], snap.stuck_events[local]
+            commands += [replace(c, robot_id=view.robot_ids[c.robot_id]) for c in snap.commands]
+        poses.flags.writeable = False
+        home = next(v.snapshot for v in views if 0 in v.robot_ids)
+        explored = [v.snapshot.explored_s for v in views]
+        return Snapshot(
+            time_s=now_s,
+            commands=_in_robot_order(commands),
+            poses=poses,
+            robot_frames=tuple(robot_frames),
+            map=home.map,
+            localization=LocalizationView(_TeamLocalization(views)),
+            costmap=home.costmap,
+            window=home.window,
+            frontier_cells=home.frontier_cells,
+            clusters=home.clusters,
+            goals_m=tuple(goals),
+            paths_m=tuple(paths),
+            idle_since_s=tuple(idle),
+            stuck_events=tuple(stuck),
+            lost=MappingProxyType(dict(self._lost)),
+            finished=all(v.snapshot.finished for v in views),
+            explored_s=None if None in explored else max(e for e in explored if e is not None),
+            timings_s=MappingProxyType(dict(self._timings_s)),
+            frames=views,
+            merges=tuple(self._merges),
+        )
+
+
+SCAN_REFINE_MIN_INLIERS = 0.6
+"""The two scans that refine a merge must agree on this share of their points."""
+SIGHTING_TOLERANCE_M = 0.15
+"""How far a robot may stand from where a match puts it: the match's error at the robot
+and the time between its pose and the scan."""
+
+
+def sighting(
+    viewer_pose: np.ndarray,
+    scan: LidarScan,
+    target_xy: np.ndarray,
+    radius_m: float,
+    tolerance_m: float = SIGHTING_TOLERANCE_M,
+) -> bool | None:
+    """Whether ``scan``, taken at ``viewer_pose``, shows a robot of ``radius_m`` at
+    ``target_xy``: True when beams end on it and beams beside it reach farther (a small
+    object, not a wall), False when the beams toward it all run past it, None when the
+    scan cannot tell (out of range, hidden behind something nearer, a wall there)."""
+    offset = np.asarray(target_xy) - viewer_pose[:2]
+    distance_m = float(np.hypot(*offset))
+    if distance_m <= radius_m + tolerance_m or distance_m >= scan.range_max_m - radius_m:
+        return None
+    bearings = wrap_angles(scan.angles + viewer_pose[2] - math.atan2(offset[1], offset[0]))
+    spacing = float(np.median(np.abs(np.diff(scan.angles)))) if len(scan.angles) > 1 else 0.0
+    half_width = math.asin(min(1.0, radius_m / distance_m)) + 0.5 * spacing
+    toward = np.abs(bearings) <= half_width
+    if np.count_nonzero(toward) < 2:
+        return None
+    ranges = scan.ranges[toward]
+    if np.all(ranges > distance_m + tolerance_m):
+        return False
+    ends_on_it = (ranges >= distance_m - radius_m - tolerance_m) & (
+        ranges <= distance_m + tolerance_m
+    )
+    if not ends_on_it.any():
+        return None
+    beside = (np.abs(bearings) > half_width) & (np.abs(bearings) <= half_width + 3 * spacing)
+    left, right = beside & (bearings > 0), beside & (bearings < 0)
+    farther = scan.ranges > distance_m + radius_m
+    return bool((left & farther).any() and (right & farther).any()) or None
+
+
+def _same_pose(candidate: MergeDecision | None, decision: MergeDecision) -> bool:
+    if candidate is None:
+        return False
+    assert candidate.pose is not None and decision.pose is not None
+    gap = np.asarray(decision.pose) - candidate.pose
+    return bool(np.hypot(gap[0], gap[1]) < SAME_POSE_M and abs(wrap_angle(gap[2])) < SAME_POSE_RAD)
+
+
+def _in_robot_order(commands: list[VelocityCommand]) -> tuple[VelocityCommand, ...]:
+    return tuple(sorted(commands, key=lambda c: c.robot_id))
