@@ -7,17 +7,13 @@ frame lies. Until it is merged, a robot has a server of its own
 Every ``merge_period_s`` each pair of frames whose maps grew by ``SEARCH_AGAIN_GROWTH``
 since their last search is searched (:func:`~acslam.mapping.merge.find_merge`: one
 frame's walls over the whole of the other's map at every heading, accepted only when
-verified). A wrong merge is worse than a late one, and one room can look just like
-another: two robots that each saw one room of a dungeon matched the rooms 13 m apart. So
-a match is a candidate until what the walls cannot tell bears it out:
-
-- the robots' LiDARs see each other (:func:`sighting`): where the match puts a robot of
-  the other frame in a robot's view, a small object must stand. A scan that runs through
-  that place refutes the match, one that ends on it confirms it;
-- or, with no robot in view, a later search finds the same pose (within ``SAME_POSE_M``
-  and ``SAME_POSE_RAD``) with ``CONFIRMING_POINTS`` more of the walls matched: walls a
-  wrong pose lays over the other map's unknown space match nothing, so only a right pose
-  keeps gaining.
+verified). A wrong merge is worse than a late one, and one place can look just like
+another: two robots that each saw one room of a dungeon matched the rooms 13 m apart, and
+in an office floor of like offices (IPA office_e) a match 24 m off kept gaining matched
+walls as both robots explored. So a match is only a candidate until what the walls
+cannot tell bears it out: the robots' LiDARs see each other (:func:`sighting`). Where the
+candidate puts a robot of the other frame in a robot's view, a small object must stand; a
+scan that runs through that place refutes the candidate, one that ends on it confirms it.
 
 A merge refines the pose (on the maps' own cells, then by two robots' scans) and builds
 one server for both frames' robots, in the frame of the lower robot id: the other frame's
@@ -66,16 +62,13 @@ search of two dungeon maps of 100 m^2 costs up to 7 s (most of it passing over p
 that put walls in free space), and little new evidence changes little."""
 SEEN_SEARCH_PERIOD_S = 6.0
 """While a robot sees something moving, its frame's pairs are searched this often."""
-CONFIRMING_POINTS = 100
-"""A candidate merge is confirmed by a try at the same pose with this many more of the
-merged frame's wall points matched (10 m more of wall at the points' 0.1 m spacing)."""
 MERGED_START_SIGMAS = np.array([0.1, 0.1, 0.02])
 """``[x, y, theta]`` sigmas (m, rad) of a start a merge placed. The merge fits the two
 maps where they overlap, after the merged robot drifted on its own; a start held as
 firmly as a known one keeps that drift in its early trajectory."""
-SAME_POSE_M = 0.3
-SAME_POSE_RAD = math.radians(5.0)
-"""Two tries found the same pose when they differ by less than this."""
+SCAN_REFINE_MAX_SHIFT_M = 0.3
+SCAN_REFINE_MAX_SHIFT_RAD = math.radians(5.0)
+"""Two scans move a merge's pose by less than this, or not at all."""
 
 
 def frame_name(base_robot_id: int) -> str:
@@ -269,10 +262,10 @@ class FramedServer:
                 seen, missed = (0, 0) if not decision.accepted else self._sightings(a, b, decision)
                 if not decision.accepted or missed:
                     self._candidates.pop(pair, None)
-                elif seen or self._confirms(self._candidates.get(pair), decision):
+                elif seen:
                     self._join(a, b, decision, now_s, (known[a], known[b]))
                     return
-                elif not _same_pose(self._candidates.get(pair), decision):
+                else:
                     self._candidates[pair] = decision
 
     def _search_due(
@@ -343,19 +336,13 @@ class FramedServer:
         if not (
             result.converged
             and result.inlier_ratio >= SCAN_REFINE_MIN_INLIERS
-            and np.hypot(shift[0], shift[1]) < SAME_POSE_M
-            and abs(wrap_angle(shift[2])) < SAME_POSE_RAD
+            and np.hypot(shift[0], shift[1]) < SCAN_REFINE_MAX_SHIFT_M
+            and abs(wrap_angle(shift[2])) < SCAN_REFINE_MAX_SHIFT_RAD
         ):
             return pose_b_in_a
         # B's frame in A's: A's sensor, the matched offset, back from B's sensor in B.
         sensor_b = between(pose_b_in_a, placed_b)
         return compose(compose(sensor_a, result.relative), between(sensor_b, np.zeros(3)))
-
-    @staticmethod
-    def _confirms(candidate: MergeDecision | None, decision: MergeDecision) -> bool:
-        if candidate is None or not _same_pose(candidate, decision):
-            return False
-        return decision.matched_points - candidate.matched_points >= CONFIRMING_POINTS
 
     def _join(
         self,
@@ -496,14 +483,6 @@ def sighting(
     left, right = beside & (bearings > 0), beside & (bearings < 0)
     farther = scan.ranges > distance_m + radius_m
     return bool((left & farther).any() and (right & farther).any()) or None
-
-
-def _same_pose(candidate: MergeDecision | None, decision: MergeDecision) -> bool:
-    if candidate is None:
-        return False
-    assert candidate.pose is not None and decision.pose is not None
-    gap = np.asarray(decision.pose) - candidate.pose
-    return bool(np.hypot(gap[0], gap[1]) < SAME_POSE_M and abs(wrap_angle(gap[2])) < SAME_POSE_RAD)
 
 
 def _in_robot_order(commands: list[VelocityCommand]) -> tuple[VelocityCommand, ...]:
