@@ -13,7 +13,9 @@ in an office floor of like offices (IPA office_e) a match 24 m off kept gaining 
 walls as both robots explored. So a match is only a candidate until what the walls
 cannot tell bears it out: the robots' LiDARs see each other (:func:`sighting`). Where the
 candidate puts a robot of the other frame in a robot's view, a small object must stand; a
-scan that runs through that place refutes the candidate, one that ends on it confirms it.
+scan that runs through that place refutes the candidate. Robots seen where it puts them at
+places ``SIGHTINGS_APART_M`` apart confirm it: a pillar or a door frame can pass for a
+robot once (in office_e one did, and merged a frame 10 m off), but does not move with it.
 
 A merge refines the pose (on the maps' own cells, then by two robots' scans) and builds
 one server for both frames' robots, in the frame of the lower robot id: the other frame's
@@ -182,9 +184,10 @@ class FramedServer:
         self._merges: list[FrameMerge] = []
         self._merge_tries = Periodic(config.algorithms.server.merge_period_s)
         # Per pair of frames, the known cells of each map when last searched and when,
-        # and the candidate merge awaiting confirmation.
+        # and the candidate merge awaiting confirmation with where (in the first frame)
+        # robots were seen where it puts them.
         self._searched: dict[tuple[str, str], tuple[tuple[int, int], float]] = {}
-        self._candidates: dict[tuple[str, str], MergeDecision] = {}
+        self._candidates: dict[tuple[str, str], tuple[MergeDecision, list[np.ndarray]]] = {}
         self._snapshots = [frame.server.snapshot(0.0) for frame in self._frames]
         self._timings_s: dict[str, float] = {}
 
@@ -247,26 +250,43 @@ class FramedServer:
         for a in range(len(self._frames)):
             for b in range(a + 1, len(self._frames)):
                 pair = (self._frames[a].name, self._frames[b].name)
-                candidate = self._candidates.get(pair)
-                if candidate is not None:
-                    seen, missed = self._sightings(a, b, candidate)
-                    if missed:
-                        del self._candidates[pair]
-                    elif seen:
-                        self._join(a, b, candidate, now_s, (known[a], known[b]))
-                        return
+                kept = self._candidates.get(pair)
+                if kept is not None and self._weigh(pair, a, b, kept[0], known, now_s):
+                    return
                 if not self._search_due(pair, (sizes[a], sizes[b]), seeing[a] or seeing[b], now_s):
                     continue
                 self._searched[pair] = ((sizes[a], sizes[b]), now_s)
                 decision = find_merge(*_search_grid(known[a]), *_search_grid(known[b]))
-                seen, missed = (0, 0) if not decision.accepted else self._sightings(a, b, decision)
-                if not decision.accepted or missed:
+                if not decision.accepted:
                     self._candidates.pop(pair, None)
-                elif seen:
-                    self._join(a, b, decision, now_s, (known[a], known[b]))
+                elif self._weigh(pair, a, b, decision, known, now_s):
                     return
-                else:
-                    self._candidates[pair] = decision
+
+    def _weigh(
+        self,
+        pair: tuple[str, str],
+        a: int,
+        b: int,
+        decision: MergeDecision,
+        known: list[tuple[np.ndarray, GridSpec]],
+        now_s: float,
+    ) -> bool:
+        """Add what the robots' scans now say of ``decision`` to the pair's candidate:
+        a scan through a place it puts a robot refutes it; robots seen where it puts them
+        at places ``SIGHTINGS_APART_M`` apart merge the frames (a pillar or a door frame
+        can pass for a robot once, but does not move with it). True once merged."""
+        seen, missed = self._sightings(a, b, decision)
+        if missed:
+            self._candidates.pop(pair, None)
+            return False
+        kept = self._candidates.get(pair)
+        sighted = kept[1] if kept is not None and _same_pose(kept[0], decision) else []
+        sighted = sighted + seen
+        if _spread_m(sighted) >= SIGHTINGS_APART_M:
+            self._join(a, b, decision, now_s, (known[a], known[b]))
+            return True
+        self._candidates[pair] = (decision, sighted)
+        return False
 
     def _search_due(
         self, pair: tuple[str, str], sizes: tuple[int, int], seeing: bool, now_s: float
@@ -285,22 +305,32 @@ class FramedServer:
         )
         return grown or (seeing and now_s - searched_s >= SEEN_SEARCH_PERIOD_S)
 
-    def _sightings(self, a: int, b: int, decision: MergeDecision) -> tuple[int, int]:
-        """How many of the two frames' robots, placed by the match, the other frame's
-        latest scans show where the match puts them, and how many they look through."""
+    def _sightings(self, a: int, b: int, decision: MergeDecision) -> tuple[list[np.ndarray], int]:
+        """Where (in frame ``a``) the two frames' latest scans show the other frame's
+        robots at the places the match puts them, and how many of those places the scans
+        look through."""
         assert decision.pose is not None
         pose_b_in_a = decision.pose
         pose_a_in_b = between(pose_b_in_a, np.zeros(3))
         radius_m = self._config.robots.radius_m
-        votes = []
-        for viewers, targets, placed in ((a, b, pose_b_in_a), (b, a, pose_a_in_b)):
+        seen: list[np.ndarray] = []
+        missed = 0
+        for viewers, targets, placed, to_a in (
+            (a, b, pose_b_in_a, np.zeros(3)),
+            (b, a, pose_a_in_b, pose_b_in_a),
+        ):
             viewer_frame, target_snapshot = self._frames[viewers], self._snapshots[targets]
             target_xy = transform_points(placed, np.asarray(target_snapshot.poses)[:, :2])
             for local in range(len(viewer_frame.robot_ids)):
                 latest = viewer_frame.server.latest_scan(local)
-                if latest is not None:
-                    votes += [sighting(*latest, xy, radius_m) for xy in target_xy]
-        return votes.count(True), votes.count(False)
+                if latest is None:
+                    continue
+                for xy in target_xy:
+                    vote = sighting(*latest, xy, radius_m)
+                    missed += vote is False
+                    if vote:
+                        seen.append(transform_points(to_a, xy[None])[0])
+        return seen, missed
 
     def _scan_refined(self, a: int, b: int, pose_b_in_a: np.ndarray) -> np.ndarray:
         """The merge's pose from the latest scans of the two robots (one of each frame)
@@ -445,6 +475,8 @@ class FramedServer:
 
 SCAN_REFINE_MIN_INLIERS = 0.6
 """The two scans that refine a merge must agree on this share of their points."""
+SIGHTINGS_APART_M = 0.5
+"""A candidate merges once robots were seen where it puts them at places this far apart."""
 SIGHTING_TOLERANCE_M = 0.15
 """How far a robot may stand from where a match puts it: the match's error at the robot
 and the time between its pose and the scan."""
@@ -483,6 +515,24 @@ def sighting(
     left, right = beside & (bearings > 0), beside & (bearings < 0)
     farther = scan.ranges > distance_m + radius_m
     return bool((left & farther).any() and (right & farther).any()) or None
+
+
+def _same_pose(kept: MergeDecision, decision: MergeDecision) -> bool:
+    """Two searches found the same candidate (within the scans' refinement bound)."""
+    assert kept.pose is not None and decision.pose is not None
+    gap = np.asarray(decision.pose) - kept.pose
+    return bool(
+        np.hypot(gap[0], gap[1]) < SCAN_REFINE_MAX_SHIFT_M
+        and abs(wrap_angle(gap[2])) < SCAN_REFINE_MAX_SHIFT_RAD
+    )
+
+
+def _spread_m(points: list[np.ndarray]) -> float:
+    """The largest distance between two of the points (0 for fewer than two)."""
+    if len(points) < 2:
+        return 0.0
+    xy = np.array(points)
+    return float(np.max(np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))))
 
 
 def _in_robot_order(commands: list[VelocityCommand]) -> tuple[VelocityCommand, ...]:
