@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.eval.slam_figures import plot_map_panels
-from acslam.geometry import between, transform_points, wrap_angle
+from acslam.geometry import between, transform_points, wrap_angle, wrap_angles
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec
 from acslam.mapping.merge import overlay, place_grid
 from acslam.pipeline.frames import FrameMerge, frame_name
@@ -39,7 +39,7 @@ def placed_poses(origin: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """(N, 3) poses of a frame at ``origin``, in the world."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     xy = transform_points(origin, poses[:, :2])
-    return np.column_stack([xy, (poses[:, 2] + origin[2] + np.pi) % (2 * np.pi) - np.pi])
+    return np.column_stack([xy, wrap_angles(poses[:, 2] + origin[2])])
 
 
 def world_values(snapshot: Snapshot, true_starts: np.ndarray, spec: GridSpec) -> np.ndarray:

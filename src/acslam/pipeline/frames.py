@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
+from scipy.spatial.distance import pdist
 
 from acslam.config import ScenarioConfig
 from acslam.geometry import between, compose, transform_points, wrap_angle, wrap_angles
@@ -531,8 +532,7 @@ def _spread_m(points: list[np.ndarray]) -> float:
     """The largest distance between two of the points (0 for fewer than two)."""
     if len(points) < 2:
         return 0.0
-    xy = np.array(points)
-    return float(np.max(np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))))
+    return float(pdist(np.array(points)).max())
 
 
 def _in_robot_order(commands: list[VelocityCommand]) -> tuple[VelocityCommand, ...]:
