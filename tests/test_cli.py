@@ -139,3 +139,16 @@ def test_slam_mrclam_on_a_missing_dataset_is_one_line_error(tmp_path: Path) -> N
     assert result.stderr.startswith("acslam: error: ")
     assert "Barcodes.dat: file not found" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_slam_mrclam_unknown_starts_needs_the_sightings(tmp_path: Path) -> None:
+    result = subprocess.run(
+        ["acslam", "slam", "mrclam", str(tmp_path), "--out", str(tmp_path / "out"),
+         "--unknown-starts", "--no-inter-robot"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "--unknown-starts merges the robots' frames by their sightings" in result.stderr
+    assert not (tmp_path / "out").exists()

@@ -519,8 +519,8 @@ def run_command(
         scenario = scenario.with_patrol(patrol_s)
     if unknown_starts:
         scenario = scenario.with_unknown_starts()
-    if distributed:
-        scenario.require_known_starts("--distributed runs")
+    if ros2:
+        scenario.require_known_starts("ROS 2 served runs")
     if (viz != "none" or record is not None) and scenario.config.robots.relative_starts == (
         "unknown"
     ):
@@ -801,6 +801,13 @@ def _algorithms(name_or_path: Path | None):
     show_default=True,
     help="Add a factor between two robots' poses when one sees the other's barcode.",
 )
+@click.option(
+    "--unknown-starts",
+    is_flag=True,
+    help="No start poses: each robot starts in its own frame, and the frames merge where "
+    "the robots' sightings of each other place them; scored after the one rigid motion "
+    "that lays the team on the truth (metrics.json's `unknown_starts` judges every merge).",
+)
 @algorithms_option("mrclam")
 def slam_mrclam_command(
     path: Path,
@@ -809,15 +816,22 @@ def slam_mrclam_command(
     known_association: bool,
     max_time_s: float | None,
     inter_robot: bool,
+    unknown_starts: bool,
     algorithms_file: Path | None,
 ) -> None:
     """Localize the 5 robots of a UTIAS MRCLAM dataset in one factor graph and score it.
 
     Landmark identities reach the association only with --known-association; start poses
-    come from the first ground-truth sample, nothing else reads ground truth.
+    come from the first ground-truth sample (none with --unknown-starts), nothing else
+    reads ground truth.
     """
     from acslam.replay.mrclam import run_mrclam
 
+    if unknown_starts and not inter_robot:
+        raise click.UsageError(
+            "--unknown-starts merges the robots' frames by their sightings of each other: "
+            "not with --no-inter-robot"
+        )
     algorithms = _algorithms(algorithms_file)
     with output_folder(out_dir, overwrite=overwrite):
         metrics = run_mrclam(
@@ -827,10 +841,23 @@ def slam_mrclam_command(
             max_time_s=max_time_s,
             algorithms=algorithms,
             inter_robot=inter_robot,
+            unknown_starts=unknown_starts,
         )
     overall = metrics["overall"]
+    if unknown_starts:
+        merges = metrics["unknown_starts"]
+        for merge in merges["merges"]:
+            error = merge["error_at_robots"]
+            click.echo(
+                f"{merge['merged_at_s']:.0f} s: robots {merge['robots']} merged into "
+                f"{merge['into']} frame ({error['translation_m']:.3f} m off at the robots"
+                f"{', FALSE' if merge['false'] else ''})"
+            )
+        if merges["unmerged_robots"]:
+            click.echo(f"never merged: robots {merges['unmerged_robots']}")
+    aligned = " after team alignment" if unknown_starts else ""
     click.echo(
-        f"position RMSE {overall['slam']['rmse_m']:.3f} m (dead reckoning "
+        f"position RMSE{aligned} {overall['slam']['rmse_m']:.3f} m (dead reckoning "
         f"{overall['dead_reckoning']['rmse_m']:.3f} m), landmark RMSE "
         f"{metrics['landmarks']['rmse_m']:.3f} m, association precision "
         f"{metrics['association']['pairwise_precision']:.3f} -> {out_dir / 'metrics.json'}"
@@ -1313,6 +1340,13 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     is_flag=True,
     help="--ros2: publish map -> <ns>/odom on /tf instead of map -> odom on /<ns>/tf.",
 )
+@click.option(
+    "--unknown-starts",
+    is_flag=True,
+    help="The server is not told where the robots start: each robot begins in its own "
+    "frame, and the frames merge where the data places them (sets "
+    "robots.relative_starts: unknown; not with --ros2 yet).",
+)
 def serve_command(
     scenario_name: str,
     team: int | list[str] | None,
@@ -1334,6 +1368,7 @@ def serve_command(
     cmd_vel_type: str,
     laser_mount: tuple[float, float, float] | None,
     global_tf: bool,
+    unknown_starts: bool,
 ) -> None:
     """Run the server in wall-clock time for robots connecting over Zenoh (acslam's own
     protocol, or with --ros2 ROS 2 robots through rmw_zenoh or the DDS bridge)."""
@@ -1347,6 +1382,10 @@ def serve_command(
     if ros2 and listen is None and not connect:
         raise click.UsageError("--ros2 needs --connect (the robots' router) or --listen")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
+    if unknown_starts:
+        scenario = scenario.with_unknown_starts()
+    if ros2:
+        scenario.require_known_starts("ROS 2 served runs")
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"

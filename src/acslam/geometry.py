@@ -41,11 +41,38 @@ def between_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.column_stack([c * dx + s * dy, -s * dx + c * dy, wrap_angles(b[:, 2] - a[:, 2])])
 
 
+def compose_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`compose` row by row of two (N, 3) pose arrays."""
+    a, b = np.atleast_2d(a), np.atleast_2d(b)
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    return np.column_stack(
+        [
+            a[:, 0] + c * b[:, 0] - s * b[:, 1],
+            a[:, 1] + s * b[:, 0] + c * b[:, 1],
+            wrap_angles(a[:, 2] + b[:, 2]),
+        ]
+    )
+
+
 def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map (N, 2) points from the frame of ``pose`` to the world frame."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rot = np.array([[c, -s], [s, c]])
     return points @ rot.T + pose[:2]
+
+
+def fit_rigid(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The pose ``[x, y, theta]`` whose :func:`transform_points` lays the (N, 2) ``source``
+    points closest to their ``target`` points in least squares (Umeyama 1991 without
+    scale). In 2D the rotation has a closed form: atan2(sum a x b, sum a . b) over the
+    centred points."""
+    source_mean, target_mean = source.mean(axis=0), target.mean(axis=0)
+    a, b = source - source_mean, target - target_mean
+    rotation_rad = math.atan2(
+        float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b))
+    )
+    turned_mean = transform_points(np.array([0.0, 0.0, rotation_rad]), source_mean[None])[0]
+    return np.array([*(target_mean - turned_mean), rotation_rad])
 
 
 def path_length_m(points_m: np.ndarray) -> float:

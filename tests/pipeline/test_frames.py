@@ -137,12 +137,14 @@ def test_the_same_seed_merges_the_same_way(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("extra", "says"),
     [
-        (["--distributed"], "robots.relative_starts"),
+        (["--distributed", "--ros2"], "robots.relative_starts"),
         (["--record", "run.mcap"], "not with unknown starts"),
         (["--viz", "rerun"], "not with unknown starts"),
     ],
 )
-def test_what_shows_one_team_frame_refuses_unknown_starts(extra: list[str], says: str) -> None:
+def test_what_shows_one_team_frame_or_speaks_ros2_refuses_unknown_starts(
+    extra: list[str], says: str
+) -> None:
     result = CliRunner().invoke(
         cli, ["run", "--scenario", "thesis-exp1", "--unknown-starts", *extra]
     )

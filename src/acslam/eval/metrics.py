@@ -12,7 +12,7 @@ from itertools import combinations
 
 import numpy as np
 
-from acslam.geometry import path_length_m, transform_points, wrap_angles
+from acslam.geometry import fit_rigid, path_length_m, transform_points, wrap_angles
 from acslam.grid import OCCUPIED, UNKNOWN
 
 
@@ -118,31 +118,25 @@ def team_alignment(
     counts a rotation of the whole map about the starts (heading error made on the way out
     of the start area, which robots that never come back cannot undo) the same as a map
     that is wrong inside. After the alignment only the latter remains: evo's ``--align``
-    without scale (Umeyama 1991), but one transform for all robots, since a per-robot
-    alignment would hide how they disagree. In 2D the least-squares rotation has a closed
-    form: theta = atan2(sum a x b, sum a . b) over the centred positions. Returns the RMSE
-    (m), the rotation (rad) and the translation (m) that take the estimate onto the truth
-    (rotation about the frame's origin first), and how far the team's mean position moves
-    (m), which unlike the translation does not grow with the map's distance from the origin.
+    without scale (:func:`~acslam.geometry.fit_rigid`), but one transform for all robots,
+    since a per-robot alignment would hide how they disagree. Returns the RMSE (m), the
+    rotation (rad) and the translation (m) that take the estimate onto the truth (rotation
+    about the frame's origin first), and how far the team's mean position moves (m), which
+    unlike the translation does not grow with the map's distance from the origin.
     """
     pairs = [_paired_poses(*trajectory, max_gap_s) for trajectory in trajectories]
     estimate = np.concatenate([e[:, :2] for e, _ in pairs])
     truth = np.concatenate([t[:, :2] for _, t in pairs])
     if not len(estimate):
         raise ValueError("the estimated trajectories do not overlap the ground truth in time")
-    estimate_mean, truth_mean = estimate.mean(axis=0), truth.mean(axis=0)
-    a, b = estimate - estimate_mean, truth - truth_mean
-    rotation_rad = math.atan2(
-        float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b))
-    )
-    turned_mean = transform_points(np.array([0.0, 0.0, rotation_rad]), estimate_mean[None])[0]
-    motion = np.array([*(truth_mean - turned_mean), rotation_rad])
+    motion = fit_rigid(estimate, truth)
+    rotation_rad = float(motion[2])
     aligned = transform_points(motion, estimate)
     return {
         "aligned_rmse_m": float(np.sqrt(np.mean(np.sum((aligned - truth) ** 2, axis=1)))),
         "rotation_rad": rotation_rad,
         "translation_m": [float(v) for v in motion[:2]],
-        "centroid_shift_m": float(np.hypot(*(truth_mean - estimate_mean))),
+        "centroid_shift_m": float(np.hypot(*(truth.mean(axis=0) - estimate.mean(axis=0)))),
     }
 
 

@@ -41,6 +41,24 @@ def plot_slam_run(
     save_figure(fig, path, dpi=120)
 
 
+def plot_track_panels(
+    path: Path, panels: list[tuple[dict[int, np.ndarray], np.ndarray, str]]
+) -> None:
+    """Side by side, each panel's trajectories ((N, 3) per robot) and landmarks (circles)
+    in its own frame, with its title: a merge of frames, before and after."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 5), squeeze=False)
+    for ax, (tracks, landmarks, title) in zip(axes[0], panels, strict=True):
+        for robot, poses in sorted(tracks.items()):
+            ax.plot(*poses[:, :2].T, color=robot_colour(robot), lw=1.0, label=f"robot {robot}")
+            ax.plot(*poses[0, :2], "o", color=robot_colour(robot), ms=4)
+        if len(landmarks):
+            ax.plot(*landmarks[:, :2].T, "o", mfc="none", mec="k", ms=5, label="landmarks")
+        ax.set_aspect("equal")
+        ax.set_title(title, fontsize=9)
+        ax.legend(loc="best", fontsize=7)
+    save_figure(fig, path, dpi=100)
+
+
 def _grid_image(values: np.ndarray) -> np.ndarray:
     return np.select([values == OCCUPIED, values == FREE], [0.0, 1.0], default=0.75)
 

@@ -55,6 +55,24 @@ class Replayed:
     landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]]
 
 
+def new_perception(
+    algorithms: AlgorithmsConfig,
+    starts: dict[int, np.ndarray],
+    start_sigmas: dict[int, np.ndarray] | None = None,
+) -> Perception:
+    """The localizer stage ``algorithms`` names, fed as the server feeds it. The robot
+    filter uses the default robot size (a recording does not say it); it only matters
+    when a scan sees another robot of the team."""
+    localizer = LOCALIZERS.create(
+        algorithms.localizer,
+        scan_matching=algorithms.scan_matching,
+        starts=starts,
+        **({} if start_sigmas is None else {"start_sigmas": start_sigmas}),
+    )
+    reach_m = RobotsConfig().radius_m + algorithms.server.robot_filter_margin_m
+    return Perception(localizer, starts, reach_m, algorithms.server.map_update_period_s)
+
+
 def localize(
     messages: Sequence[RobotMessage],
     algorithms: AlgorithmsConfig,
@@ -66,15 +84,9 @@ def localize(
     recording's first stamp ``start_s`` (default: the first message's). With ``finish``
     the localizer ends the data with a last loop search and a settled estimate; without,
     the estimate is where a live server's would be when the run stopped.
-
-    The robot filter uses the default robot size (a recording does not say it); it only
-    matters when a scan sees another robot of the team.
     """
-    localizer = LOCALIZERS.create(
-        algorithms.localizer, scan_matching=algorithms.scan_matching, starts=starts
-    )
-    reach_m = RobotsConfig().radius_m + algorithms.server.robot_filter_margin_m
-    perception = Perception(localizer, starts, reach_m, algorithms.server.map_update_period_s)
+    perception = new_perception(algorithms, starts)
+    localizer = perception.localizer
     source = RecordedSource(messages, algorithms.planning.control_period_s, start_s)
     scans: list[KeptScan] = []
     landmarks: list[tuple[LandmarkObservations, list[AssociationResult]]] = []
