@@ -47,16 +47,14 @@ class Ros2ServeOptions:
     startup_timeout_s: float = 60.0
 
 
-TruthSource = Callable[[Ros2Source], runner.TruthLog | None]
+TruthSource = Callable[[Ros2Source], runner.TruthLog]
 
 
-def topic_truth(source: Ros2Source) -> runner.TruthLog | None:
+def topic_truth(source: Ros2Source) -> runner.TruthLog:
     """Ground truth from the robots' ``ground_truth`` topics (simulated robots publish
-    one); None when no robot published any. Contacts are not on the wire."""
-    trajectories = source.truth()
-    if not any(len(t) for t in trajectories):
-        return None
-    return runner.TruthLog(trajectories, None)
+    one; a real robot's trajectory is empty, and the run is scored on what needs no
+    truth). Contacts are not on the wire."""
+    return runner.TruthLog(source.truth(), None)
 
 
 def serve_ros2(
