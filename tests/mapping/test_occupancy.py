@@ -155,16 +155,19 @@ def test_random_corrections_equal_integrating_from_scratch() -> None:
         pose = np.array([*rng.uniform(-3, 3, 2), rng.uniform(-np.pi, np.pi)])
         team.add_scan(robot_id, ("scan", key), ranges, angles, pose)
         scans[key] = (robot_id, ranges, angles)
-    for _ in range(150):
+    for move in range(150):
         key = int(rng.integers(30))
         new_pose = team.scan_pose(("scan", key)) + rng.normal(0.0, [0.1, 0.1, 0.05])
         team.move_scan(("scan", key), new_pose)
+        if move % 10 == 0:  # read between changes, as the server does
+            assert np.array_equal(team.known_mask(), team.global_grid.known_mask())
 
     fresh = TeamMap(cfg, spec=spec)
     for key, (robot_id, ranges, angles) in scans.items():
         fresh.add_scan(robot_id, ("scan", key), ranges, angles, team.scan_pose(("scan", key)))
     assert np.array_equal(team.global_grid.accumulator_fixed, fresh.global_grid.accumulator_fixed)
     assert np.array_equal(team.global_grid.log_odds(), fresh.global_grid.log_odds())
+    assert np.array_equal(team.known_mask(), fresh.global_grid.known_mask())
     for robot_id in range(3):
         assert np.array_equal(
             team.robot_grid(robot_id).accumulator_fixed,
