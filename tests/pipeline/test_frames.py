@@ -151,6 +151,18 @@ def test_what_shows_one_team_frame_or_speaks_ros2_refuses_unknown_starts(
     assert result.exit_code != 0 and says in result.output
 
 
+def test_a_ros2_served_run_refuses_unknown_starts_before_making_its_folder(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "run"
+    result = CliRunner().invoke(
+        cli,
+        ["serve", "--ros2", "--connect", "tcp/127.0.0.1:1", "--unknown-starts", "--out", str(out)],
+    )
+    assert result.exit_code == 1 and "robots.relative_starts" in result.output
+    assert not out.exists()
+
+
 def test_a_sweep_without_known_starts_keeps_its_runs_apart() -> None:
     grid = builtin_grid("thesis")
     known = expand(grid, seeds=1)
