@@ -82,6 +82,13 @@ def test_branch_and_bound_returns_what_the_exhaustive_search_returns(seed: int, 
     assert fast_other is not None and slow_other is not None
     assert fast_other.score == slow_other.score < fast.score
     np.testing.assert_allclose(fast_other.pose, slow_other.pose)
+    # And the best outside both: blocks wholly inside either zone are pruned unsearched.
+    kwargs = {**kwargs, "excluded": (fast, fast_other)}
+    fast_third = best_match(local, pyramid, window, **kwargs)
+    slow_third = exhaustive_match(local, pyramid, window, **kwargs)
+    assert fast_third is not None and slow_third is not None
+    assert fast_third.score == slow_third.score <= fast_other.score
+    np.testing.assert_allclose(fast_third.pose, slow_third.pose)
 
 
 def test_a_minimum_score_above_the_best_finds_nothing() -> None:
