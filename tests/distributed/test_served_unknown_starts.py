@@ -13,12 +13,13 @@ from pathlib import Path
 def test_a_served_team_without_start_poses_merges_and_explores(tmp_path: Path) -> None:
     """thesis-exp1 with two robots: in process the frames merge within 8 s; served, the
     search runs in the merge lane and its result is weighed a cycle or more later (merged
-    at 4.3 s, 0.01 m off). Bounds: merged, no false merge, no collision, in 15 s of
-    wall-clock time."""
+    at 4.3 s, 0.01 m off, on quiet cores). Bounds: merged, no false merge, no collision,
+    in 30 s of wall-clock time: a served run keeps the wall clock, and on cores shared
+    with other work its first merge once came after 15 s."""
     out = tmp_path / "run"
     command = [
         sys.executable, "-m", "acslam.cli", "run", "--distributed", "--unknown-starts",
-        "--scenario", "thesis-exp1", "--robots", "2", "--max-time", "15", "--out", str(out),
+        "--scenario", "thesis-exp1", "--robots", "2", "--max-time", "30", "--out", str(out),
     ]  # fmt: skip
     result = subprocess.run(command, capture_output=True, text=True, timeout=150, check=False)
     assert result.returncode == 0, result.stderr[-2000:]
