@@ -37,10 +37,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import Future
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from functools import partial
 from types import MappingProxyType
 
 import numpy as np
@@ -53,7 +51,6 @@ from acslam.mapping.costmap import known_window
 from acslam.mapping.merge import MergeDecision, coarsened, find_merge, on_finer_cells
 from acslam.mapping.scan_matching import match_scans, prepare_scan, scan_points
 from acslam.messages import LidarScan, RobotMessage, VelocityCommand
-from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import LocalizationView, Snapshot
 from acslam.schedule import Periodic
@@ -72,10 +69,6 @@ MERGED_START_SIGMAS = np.array([0.1, 0.1, 0.02])
 """``[x, y, theta]`` sigmas (m, rad) of a start a merge placed. The merge fits the two
 maps where they overlap, after the merged robot drifted on its own; a start held as
 firmly as a known one keeps that drift in its early trajectory."""
-MERGE_LANE = "merges"
-"""The jobs' lane of the merge searches (:mod:`acslam.pipeline.jobs`): in a served run a
-search of two floor-plan maps (up to minutes in IPA office_e) runs beside the control
-loop, and its result is weighed in the first cycle after it ends."""
 SCAN_REFINE_MAX_SHIFT_M = 0.3
 SCAN_REFINE_MAX_SHIFT_RAD = math.radians(5.0)
 """Two scans move a merge's pose by less than this, or not at all."""
@@ -179,21 +172,10 @@ class FramedServer:
     """The server for a team with unknown relative starts: a frame per robot, merged as
     the data allows (see the module's docstring)."""
 
-    def __init__(
-        self,
-        config: ScenarioConfig,
-        robot_count: int,
-        extent: GridSpec,
-        jobs: Callable[[], Jobs] = InlineJobs,
-    ) -> None:
+    def __init__(self, config: ScenarioConfig, robot_count: int, extent: GridSpec) -> None:
         """``extent``: the deployment's map extent (only its size is used: the frames'
-        grids are squares about their origins that hold it). ``jobs`` makes the jobs of
-        each frame's server and of the merge searches (:class:`Server`'s ``jobs``)."""
+        grids are squares about their origins that hold it)."""
         self._config = config
-        self._make_jobs = jobs
-        self._jobs = jobs()
-        self._search: tuple[tuple[str, str], Future[MergeDecision]] | None = None
-        """The search running in the merge lane: its pair of frames and its result."""
         self._spec = frame_grid_spec(extent)
         self._frames = [
             self._new_frame((i,), np.zeros((1, 3)), frozenset()) for i in range(robot_count)
@@ -216,10 +198,7 @@ class FramedServer:
         """``placed``: the robots whose starts a merge placed (held as loosely as
         ``MERGED_START_SIGMAS``)."""
         sigmas = {robot_ids.index(r): MERGED_START_SIGMAS for r in placed}
-        server = Server(
-            self._config, starts, self._spec, self._make_jobs(),
-            scan_obstacles=True, start_sigmas=sigmas,
-        )  # fmt: skip
+        server = Server(self._config, starts, self._spec, scan_obstacles=True, start_sigmas=sigmas)
         return _Frame(robot_ids, starts, placed, server)
 
     def _frame_of(self, robot_id: int) -> _Frame:
@@ -232,7 +211,6 @@ class FramedServer:
         frame.server.mark_lost(frame.robot_ids.index(robot_id), now_s)
 
     def close(self) -> None:
-        self._jobs.close()
         for frame in self._frames:
             frame.server.close()
 
@@ -265,43 +243,25 @@ class FramedServer:
     def _merge(self, now_s: float) -> None:
         """Look at every pair of frames: a candidate merge the robots now see each other
         by is taken; a pair whose maps grew by ``SEARCH_AGAIN_GROWTH`` since it was last
-        searched is searched again, one search at a time (``MERGE_LANE``). The first merge
-        taken ends the look (the frames change; the rest wait for the next)."""
+        searched is searched again. The first merge taken ends the look (the frames
+        change; the rest wait for the next)."""
         known = [_known_part(s, self._spec) for s in self._snapshots]
         sizes = [int(np.count_nonzero(values != UNKNOWN)) for values, _ in known]
         seeing = [frame.server.sees_moving_object() for frame in self._frames]
-        names = {frame.name for frame in self._frames}
-        if self._search is not None and not set(self._search[0]) <= names:
-            self._search = None  # a frame merged into another while it ran: void
         for a in range(len(self._frames)):
             for b in range(a + 1, len(self._frames)):
                 pair = (self._frames[a].name, self._frames[b].name)
                 kept = self._candidates.get(pair)
                 if kept is not None and self._weigh(pair, a, b, kept[0], known, now_s):
                     return
-                decision = self._finished_search(pair)
-                if decision is None:
-                    if self._search is not None or not self._search_due(
-                        pair, (sizes[a], sizes[b]), seeing[a] or seeing[b], now_s
-                    ):
-                        continue
-                    self._searched[pair] = ((sizes[a], sizes[b]), now_s)
-                    grids = (*_search_grid(known[a]), *_search_grid(known[b]))
-                    result = self._jobs.submit(MERGE_LANE, partial(find_merge, *grids))
-                    if not result.done():
-                        self._search = (pair, result)
-                        continue
-                    decision = result.result()
-                if self._weigh(pair, a, b, decision, known, now_s):
+                if not self._search_due(pair, (sizes[a], sizes[b]), seeing[a] or seeing[b], now_s):
+                    continue
+                self._searched[pair] = ((sizes[a], sizes[b]), now_s)
+                decision = find_merge(*_search_grid(known[a]), *_search_grid(known[b]))
+                if not decision.accepted:
+                    self._candidates.pop(pair, None)
+                elif self._weigh(pair, a, b, decision, known, now_s):
                     return
-
-    def _finished_search(self, pair: tuple[str, str]) -> MergeDecision | None:
-        """The decision of the search of ``pair`` in the merge lane, once it ended."""
-        if self._search is None or self._search[0] != pair or not self._search[1].done():
-            return None
-        decision = self._search[1].result()
-        self._search = None
-        return decision
 
     def _weigh(
         self,
@@ -315,11 +275,7 @@ class FramedServer:
         """Add what the robots' scans now say of ``decision`` to the pair's candidate:
         a scan through a place it puts a robot refutes it; robots seen where it puts them
         at places ``SIGHTINGS_APART_M`` apart merge the frames (a pillar or a door frame
-        can pass for a robot once, but does not move with it). A search that found no
-        match drops the candidate. True once merged."""
-        if not decision.accepted:
-            self._candidates.pop(pair, None)
-            return False
+        can pass for a robot once, but does not move with it). True once merged."""
         seen, missed = self._sightings(a, b, decision)
         if missed:
             self._candidates.pop(pair, None)
@@ -448,8 +404,6 @@ class FramedServer:
         for robot_id, lost_s in self._lost.items():
             if robot_id in robot_ids:
                 merged.server.mark_lost(robot_ids.index(robot_id), lost_s)
-        first.server.close()
-        second.server.close()
         self._frames[a] = merged
         del self._frames[b]
         # Frame a keeps its name and coordinates; what was found about frame b is gone.
