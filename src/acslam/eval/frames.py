@@ -94,7 +94,8 @@ def world_known(
     return known
 
 
-def _error(estimated: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+def pose_error(estimated: np.ndarray, true: np.ndarray) -> tuple[float, float]:
+    """Position (m) and wrapped heading (rad) error of a pose."""
     return (
         float(np.hypot(*(np.asarray(estimated[:2]) - true[:2]))),
         abs(wrap_angle(float(estimated[2] - true[2]))),
@@ -117,7 +118,7 @@ def merge_metrics(
         into, merged = merge.into_robot_ids[0], merge.merged_robot_ids[0]
         assert merge.decision.pose is not None
         true = between(true_starts[into], true_starts[merged])
-        error_m, error_rad = _error(merge.decision.pose, true)
+        error_m, error_rad = pose_error(merge.decision.pose, true)
         placed = transform_points(merge.decision.pose, merge.merged_poses[:, :2])
         stood = np.array(
             [_true_xy(truth[r], merge.time_s) for r in merge.merged_robot_ids]
@@ -150,7 +151,7 @@ def merge_metrics(
             _, poses = home.snapshot.localization.trajectory(home.robot_ids.index(robot_id))
             start = poses[0]
             true = between(true_starts[0], true_starts[robot_id])
-            error_m, error_rad = _error(start, true)
+            error_m, error_rad = pose_error(start, true)
             robots[name].update(start_error_m=error_m, start_error_rad=error_rad)
     return {
         "merges": merges,

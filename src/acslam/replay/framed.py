@@ -251,13 +251,14 @@ class _Team:
         del self.frames[b.base]
         self.frames[a.base] = frame
         localizer = frame.perception.localizer
+        after = FrameContents.of(frame)
         self.merges.append(
             Merge(
                 now_s, a.base, b.base, sorted(b.starts), alignment,
-                localizer.trajectory(b.base)[1][0],
+                after.tracks[b.base][0],
                 {r: _latest_keyframe(*localizer.trajectory(r)) for r in sorted(robots)},
                 (FrameContents.of(a), FrameContents.of(b)),
-                FrameContents.of(frame),
+                after,
             )
         )  # fmt: skip
 

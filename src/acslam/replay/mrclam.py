@@ -24,7 +24,7 @@ from scipy.optimize import linear_sum_assignment
 
 from acslam.config import AlgorithmsConfig, SlamConfig
 from acslam.datasets.mrclam import ROBOT_IDS, MrclamData, read_mrclam
-from acslam.eval.frames import FALSE_MERGE_M, FALSE_MERGE_RAD
+from acslam.eval.frames import FALSE_MERGE_M, FALSE_MERGE_RAD, placed_poses, pose_error
 from acslam.eval.metrics import (
     interpolate_poses,
     localization_errors,
@@ -38,7 +38,6 @@ from acslam.geometry import (
     compose,
     fit_rigid,
     transform_points,
-    wrap_angle,
     wrap_angles,
 )
 from acslam.messages import (
@@ -246,10 +245,8 @@ def _frame_origins(data: MrclamData, messages: Sequence[RobotMessage]) -> dict[i
 
 
 def _pose_error(estimate: np.ndarray, truth: np.ndarray) -> dict[str, float]:
-    return {
-        "translation_m": float(np.hypot(*(estimate[:2] - truth[:2]))),
-        "rotation_rad": abs(wrap_angle(float(estimate[2] - truth[2]))),
-    }
+    translation_m, rotation_rad = pose_error(estimate, truth)
+    return {"translation_m": translation_m, "rotation_rad": rotation_rad}
 
 
 def _error_at_robots(merge: Merge, data: MrclamData) -> dict[str, float]:
@@ -344,12 +341,9 @@ def _aligned(
         MAX_GROUNDTRUTH_GAP_S,
     )
     motion = np.array([*alignment["translation_m"], alignment["rotation_rad"]])
-    moved = {}
-    for robot, (stamps, poses) in trajectories.items():
-        placed = poses.copy()
-        placed[:, :2] = transform_points(motion, poses[:, :2])
-        placed[:, 2] = wrap_angles(poses[:, 2] + motion[2])
-        moved[robot] = (stamps, placed)
+    moved = {
+        r: (stamps, placed_poses(motion, poses)) for r, (stamps, poses) in trajectories.items()
+    }
     return moved, alignment, motion
 
 
