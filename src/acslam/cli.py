@@ -664,7 +664,9 @@ def _progress(name: str, limit_s: float) -> Iterator[Callable]:
             f"({min(100.0, 100 * time_s / limit_s):.0f} %), "
             f"{explored_m2:.1f} m² mapped, "
             f"{plural(len(snapshot.frontier_cells), 'frontier cell')}, "
-            f"{now_s - started_s:.0f} s elapsed"
+            # Unknown starts: how many frames are still apart.
+            + (f"{plural(len(snapshot.frames), 'frame')}, " if snapshot.frames else "")
+            + f"{now_s - started_s:.0f} s elapsed"
         )
 
     yield show_line

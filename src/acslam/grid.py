@@ -107,6 +107,19 @@ class Window:
         return np.asarray(cells) - np.array([self.row0, self.col0])
 
 
+def window_around(spec: GridSpec, center_xy_m: np.ndarray, half_size_m: float) -> Window:
+    """The cells within ``half_size_m`` (per axis) of a point, clipped to the grid (at
+    least one cell, the nearest)."""
+    res = spec.resolution_m
+    c0, r0 = np.floor((np.asarray(center_xy_m) - half_size_m - spec.extent_m[::2]) / res)
+    c1, r1 = np.floor((np.asarray(center_xy_m) + half_size_m - spec.extent_m[::2]) / res) + 1
+    r0, r1 = int(np.clip(r0, 0, spec.rows - 1)), int(np.clip(r1, 1, spec.rows))
+    c0, c1 = int(np.clip(c0, 0, spec.cols - 1)), int(np.clip(c1, 1, spec.cols))
+    r1, c1 = max(r1, r0 + 1), max(c1, c0 + 1)
+    local = GridSpec(spec.origin_x_m + c0 * res, spec.origin_y_m + r0 * res, res, r1 - r0, c1 - c0)
+    return Window(r0, c0, local)
+
+
 @numba.njit(cache=True)
 def bresenham(r0: int, c0: int, r1: int, c1: int) -> np.ndarray:
     """Cells of the Bresenham line from ``(r0, c0)`` to ``(r1, c1)``, both included.

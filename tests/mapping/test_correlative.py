@@ -91,6 +91,38 @@ def test_branch_and_bound_returns_what_the_exhaustive_search_returns(seed: int, 
     np.testing.assert_allclose(fast_third.pose, slow_third.pose)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_window_pinned_on_a_point_holds_that_point_and_equals_the_exhaustive_search(
+    seed: int,
+) -> None:
+    """A teammate saw the robot at ``seen``: only poses that put the robot's place near it,
+    at every heading, are searched, and branch and bound still returns the exhaustive
+    search's pose, which puts the robot within the window."""
+    rng = np.random.default_rng(seed)
+    values, spec = _random_map(rng)
+    pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)
+    occupied = np.argwhere(values == OCCUPIED)
+    picked = spec.cell_to_world(occupied[rng.choice(len(occupied), 150, replace=False)])
+    truth = np.array([*rng.uniform(1.0, 2.0, 2), rng.uniform(-math.pi, math.pi)])
+    c, s = math.cos(truth[2]), math.sin(truth[2])
+    local = (picked - truth[:2]) @ np.array([[c, -s], [s, c]])
+    robot_local = rng.uniform(-1.0, 1.0, 2)  # the robot's place in the points' frame
+    seen = truth[:2] + np.array([[c, -s], [s, c]]) @ robot_local + rng.uniform(-0.1, 0.1, 2)
+    window = SearchWindow.pinned(robot_local, seen, 0.25)
+    fast = best_match(local, pyramid, window)
+    slow = exhaustive_match(local, pyramid, window)
+    assert fast is not None and slow is not None
+    assert fast.score == slow.score
+    np.testing.assert_allclose(fast.pose, slow.pose)
+    placed_robot = fast.pose[:2] + np.array(
+        [[math.cos(fast.pose[2]), -math.sin(fast.pose[2])],
+         [math.sin(fast.pose[2]), math.cos(fast.pose[2])]]
+    ) @ robot_local  # fmt: skip
+    assert np.all(np.abs(placed_robot - seen) <= 0.25 + spec.resolution_m)
+    assert np.linalg.norm(fast.pose[:2] - truth[:2]) <= 2 * spec.resolution_m
+    assert abs(wrap_angle(fast.pose[2] - truth[2])) <= 2 * fast.angle_step_rad
+
+
 def test_a_minimum_score_above_the_best_finds_nothing() -> None:
     values, spec = _random_map(np.random.default_rng(1))
     pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)

@@ -16,7 +16,7 @@ from scipy import ndimage
 from acslam.cli import cli
 from acslam.geometry import compose, transform_points, wrap_angle
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from acslam.mapping.merge import MergeParams, find_merge, merge_maps
+from acslam.mapping.merge import MergeParams, Pin, find_merge, merge_maps
 from acslam.worlds.mapio import load_map, save_map
 
 RESOLUTION_M = 0.05
@@ -164,6 +164,27 @@ def test_a_symmetric_view_is_not_merged_until_the_symmetry_is_broken() -> None:
     assert decision.second_score >= 0.9 * decision.score
     distance_m, angle_rad = _pose_error(decision.pose, relative)
     assert distance_m <= 2 * RESOLUTION_M and angle_rad <= 2 * decision.angle_step_rad
+
+
+def test_a_robot_seen_where_it_stands_pins_the_search_and_breaks_the_symmetry() -> None:
+    """The plain symmetric hall, which the whole-map search must refuse: A saw B's robot
+    (at B's origin) 0.2 m from where it stood. Only poses that put it within the pin's
+    0.5 m are searched, so the twin pose, which puts it 14 m away in the west room, is not
+    a rival: B merges at the true pose. A robot seen where B's is not (in the corridor)
+    gives no merge."""
+    frame_a = np.array([10.0, 5.0, 0.0])
+    frame_b = np.array([17.0, 5.0, 0.8])
+    relative = compose(np.array([-10.0, -5.0, 0.0]), frame_b)
+    plain = symmetric_hall(pillar=False)
+    map_a = seen_map(plain, frame_a, lambda p: np.ones(len(p), dtype=bool), 22.0)
+    map_b = seen_map(plain, frame_b, lambda p: p[:, 0] > 14.5, 12.0)
+    seen_at = relative[:2] + np.array([0.12, -0.16])
+    decision = find_merge(*map_a, *map_b, pin=Pin(seen_at, np.zeros(2), 0.5, 10.0))
+    assert decision.accepted, decision.reason
+    distance_m, angle_rad = _pose_error(decision.pose, relative)
+    assert distance_m <= 2 * RESOLUTION_M and angle_rad <= 2 * decision.angle_step_rad
+    in_corridor = Pin(np.array([-2.0, 0.0]), np.zeros(2), 0.5, 10.0)
+    assert not find_merge(*map_a, *map_b, pin=in_corridor).accepted
 
 
 def test_the_best_scoring_pose_is_passed_over_when_it_puts_walls_in_free_space() -> None:

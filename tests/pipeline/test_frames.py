@@ -17,7 +17,7 @@ from acslam.geometry import between
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan
 from acslam.pipeline.frames import frame_grid_spec, sighting
-from acslam.pipeline.server import Server
+from acslam.pipeline.server import Server, small_objects_m
 from acslam.planning.field import DistanceField, ObstacleField
 from acslam.runner import run_exploration
 from acslam.scenario import UNKNOWN_STARTS_SUFFIX, load_scenario
@@ -180,3 +180,32 @@ def test_a_sighting_tells_a_robot_from_a_wall_and_from_empty_space() -> None:
     hidden = np.where(np.abs(angles) <= 10, 1.0, open_room)
     assert sighting(viewer, _scan(hidden), target, 0.105) is None
     assert sighting(viewer, _scan(open_room), np.array([7.95, 0.0]), 0.105) is None  # too far
+
+
+@pytest.mark.parametrize("distance_m", [1.0, 2.0, 3.5])
+def test_a_robot_in_free_space_is_seen_near_its_centre_and_a_wall_is_not_a_robot(
+    distance_m: float,
+) -> None:
+    """Beams at 1 degree that hit a robot of radius r end on its near half, whose mean lies
+    r * pi / 4 before its centre (beams are about evenly spread across it): the centre
+    guessed one radius behind that mean is within r * (1 - pi / 4) plus the beams'
+    spacing of the truth. Unexplained returns as wide as a wall, or too few, are no
+    robot."""
+    radius_m, bearing = 0.105, 0.4
+    centre = distance_m * np.array([math.cos(bearing), math.sin(bearing)])
+    viewer = np.array([0.0, 0.0, 0.3])
+    angles = np.radians(np.arange(-180.0, 180.0)) + viewer[2]
+    directions = np.column_stack([np.cos(angles), np.sin(angles)])
+    # Where each beam meets the circle (the nearer root), else 5 m on to a wall.
+    along = directions @ centre
+    square = along**2 - (distance_m**2 - radius_m**2)
+    hits = (square >= 0) & (along > 0)
+    ranges = np.where(hits, along - np.sqrt(np.where(hits, square, 0.0)), 5.0)
+    ends = ranges[:, None] * directions
+    (found,) = small_objects_m(viewer, ends, hits, radius_m)
+    spacing_m = distance_m * math.radians(1.0)
+    assert np.linalg.norm(found - centre) <= radius_m * (1 - math.pi / 4) + spacing_m
+    wall = np.abs(np.degrees(angles - viewer[2])) < 20  # 40 beams at 5 m: 3.5 m wide
+    assert small_objects_m(viewer, ends, wall, radius_m).shape == (0, 2)
+    two = np.flatnonzero(hits)[:2]
+    assert small_objects_m(viewer, ends, np.isin(np.arange(360), two), radius_m).shape == (0, 2)

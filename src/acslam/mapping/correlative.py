@@ -112,16 +112,19 @@ def block_maxima(field: np.ndarray, depth: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SearchWindow:
-    """The poses searched: the points' centroid within ``half_size_m`` (x, y) of
-    ``centroid_xy_m`` and the heading within ``half_angle_rad`` of ``center_theta_rad``
-    (pi: every heading). The search turns the points about their centroid, so a window
-    on the centroid is the same at every heading.
+    """The poses searched: the points' pivot within ``half_size_m`` (x, y) of
+    ``center_xy_m`` and the heading within ``half_angle_rad`` of ``center_theta_rad``
+    (pi: every heading). The search turns the points about the pivot, so a window on the
+    pivot is the same at every heading. The pivot is the points' centroid (the fewest
+    angle steps), or ``pivot_m``, a point of the points' frame whose place is known to
+    within the window: where a teammate saw the robot that stands there (:meth:`pinned`).
     """
 
-    centroid_xy_m: tuple[float, float]
+    center_xy_m: tuple[float, float]
     half_size_m: tuple[float, float]
     center_theta_rad: float = 0.0
     half_angle_rad: float = math.pi
+    pivot_m: tuple[float, float] | None = None
 
     @classmethod
     def covering(cls, spec: GridSpec, points_m: np.ndarray) -> SearchWindow:
@@ -145,6 +148,18 @@ class SearchWindow:
         y = pose[1] + s * centroid[0] + c * centroid[1]
         return cls((x, y), (half_size_m, half_size_m), float(pose[2]), half_angle_rad)
 
+    @classmethod
+    def pinned(
+        cls, pivot_m: np.ndarray, center_xy_m: np.ndarray, half_size_m: float
+    ) -> SearchWindow:
+        """The poses, at every heading, that put the points' ``pivot_m`` within
+        ``half_size_m`` of ``center_xy_m``."""
+        return cls(
+            (float(center_xy_m[0]), float(center_xy_m[1])),
+            (half_size_m, half_size_m),
+            pivot_m=(float(pivot_m[0]), float(pivot_m[1])),
+        )
+
 
 @dataclass(frozen=True)
 class Match:
@@ -164,8 +179,8 @@ class _Candidates:
     angles_rad: np.ndarray
     cells: np.ndarray  # (angles, points, 2) [row, col], int64
     offsets: tuple[int, int]  # columns, rows of offsets
-    corner_xy_m: np.ndarray  # the centroid's position at offset (0, 0)
-    centroid_m: np.ndarray
+    corner_xy_m: np.ndarray  # the pivot's position at offset (0, 0)
+    pivot_m: np.ndarray
     angle_step_rad: float
 
 
@@ -178,8 +193,8 @@ def angle_step_rad(resolution_m: float, reach_m: float) -> float:
 
 def _candidates(points_m: np.ndarray, spec: GridSpec, window: SearchWindow) -> _Candidates:
     points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
-    centroid = points_m.mean(axis=0)
-    centred = points_m - centroid
+    pivot = points_m.mean(axis=0) if window.pivot_m is None else np.array(window.pivot_m)
+    centred = points_m - pivot
     reach_m = float(np.max(np.linalg.norm(centred, axis=1)))
     step = angle_step_rad(spec.resolution_m, reach_m)
     if window.half_angle_rad >= math.pi:
@@ -192,24 +207,24 @@ def _candidates(points_m: np.ndarray, spec: GridSpec, window: SearchWindow) -> _
     res = spec.resolution_m
     columns = max(1, math.ceil(2 * window.half_size_m[0] / res) + 1)
     rows = max(1, math.ceil(2 * window.half_size_m[1] / res) + 1)
-    # At offset (0, 0) the centroid stands at the window's corner.
-    corner = np.asarray(window.centroid_xy_m, dtype=float) - np.asarray(window.half_size_m)
+    # At offset (0, 0) the pivot stands at the window's corner.
+    corner = np.asarray(window.center_xy_m, dtype=float) - np.asarray(window.half_size_m)
     cos, sin = np.cos(angles)[:, None], np.sin(angles)[:, None]
     x = cos * centred[None, :, 0] - sin * centred[None, :, 1] + corner[0]
     y = sin * centred[None, :, 0] + cos * centred[None, :, 1] + corner[1]
     cells = np.empty((len(angles), len(centred), 2), dtype=np.int64)
     cells[..., 0] = np.floor((y - spec.origin_y_m) / res).astype(np.int64)
     cells[..., 1] = np.floor((x - spec.origin_x_m) / res).astype(np.int64)
-    return _Candidates(angles, cells, (columns, rows), corner, centroid, step)
+    return _Candidates(angles, cells, (columns, rows), corner, pivot, step)
 
 
 def _pose(candidates: _Candidates, k: int, dx: int, dy: int, resolution_m: float) -> np.ndarray:
     """The frame pose whose centred points land at angle ``k``, offset (dx, dy)."""
     theta = float(candidates.angles_rad[k])
-    centroid_xy = candidates.corner_xy_m + resolution_m * np.array([dx, dy], dtype=float)
+    pivot_xy = candidates.corner_xy_m + resolution_m * np.array([dx, dy], dtype=float)
     c, s = math.cos(theta), math.sin(theta)
-    cx, cy = candidates.centroid_m
-    origin = centroid_xy - np.array([c * cx - s * cy, s * cx + c * cy])
+    cx, cy = candidates.pivot_m
+    origin = pivot_xy - np.array([c * cx - s * cy, s * cx + c * cy])
     return np.array([origin[0], origin[1], math.atan2(s, c)])
 
 
@@ -342,9 +357,9 @@ def _leaf(candidates: _Candidates, pose: np.ndarray, res: float) -> tuple[int, i
     """The (angle, dx, dy) of the search's grid nearest ``pose``."""
     theta = float(pose[2])
     c, s = math.cos(theta), math.sin(theta)
-    cx, cy = candidates.centroid_m
-    centroid_xy = pose[:2] + np.array([c * cx - s * cy, s * cx + c * cy])
-    dx, dy = np.rint((centroid_xy - candidates.corner_xy_m) / res).astype(int)
+    cx, cy = candidates.pivot_m
+    pivot_xy = pose[:2] + np.array([c * cx - s * cy, s * cx + c * cy])
+    dx, dy = np.rint((pivot_xy - candidates.corner_xy_m) / res).astype(int)
     k = int(np.argmin(np.abs(wrap_angles(candidates.angles_rad - theta))))
     return k, int(dx), int(dy)
 
@@ -377,7 +392,7 @@ def best_match(
     """The best pose of the points' frame in the window that scores above ``min_score``
     (None if there is none).
 
-    Poses within ``excluded_radius_m`` (per axis, of the points' centroid) and
+    Poses within ``excluded_radius_m`` (per axis, of the pivot) and
     ``excluded_angle_rad`` of one in ``excluded`` are left out: the best *other* mode,
     which says whether the first one is unique.
     """

@@ -34,7 +34,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from acslam.geometry import between, transform_points
-from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, window_around
 from acslam.mapping.correlative import (
     LikelihoodPyramid,
     Match,
@@ -144,17 +144,45 @@ def longest_wall_m(points_m: np.ndarray, link_m: float) -> float:
     return float(max(np.hypot(*extent) for extent in extents))
 
 
+@dataclass(frozen=True)
+class Pin:
+    """A sighting's word on where B lies: B's point ``b_xy_m`` (where a robot of B stood)
+    lies within ``half_size_m`` (per axis) of A's point ``a_xy_m`` (where a robot of A saw
+    it), at a heading the sighting does not tell. Only B's surfaces within ``reach_m`` of
+    ``b_xy_m`` are matched: the place the two robots met, which both have seen."""
+
+    a_xy_m: np.ndarray
+    b_xy_m: np.ndarray
+    half_size_m: float
+    reach_m: float
+
+
 def find_merge(
     values_a: np.ndarray,
     spec_a: GridSpec,
     values_b: np.ndarray,
     spec_b: GridSpec,
     params: MergeParams | None = None,
+    pin: Pin | None = None,
 ) -> MergeDecision:
-    """Where map B lies in map A, searched over all of A at every heading, and verified."""
+    """Where map B lies in map A, searched at every heading over all of A, or only where
+    ``pin`` puts it, and verified."""
     params = params or MergeParams()
     points = surface_points(values_b, spec_b, params.point_spacing_m)
-    pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, params.depth)
+    if pin is None:
+        window = SearchWindow.covering(spec_a, points)
+    else:
+        window = SearchWindow.pinned(pin.b_xy_m, pin.a_xy_m, pin.half_size_m)
+        points = points[np.hypot(*(points - pin.b_xy_m).T) <= pin.reach_m]
+        # Every pose searched keeps those points within this of a_xy_m: A beyond it
+        # (with a margin where the field still feels a wall) changes nothing.
+        crop = window_around(spec_a, pin.a_xy_m, pin.reach_m + pin.half_size_m + 4 * params.sigma_m)
+        values_a, spec_a = crop.crop(values_a), crop.spec
+    # The coarsest level needs to span the window, no more: a block wider than it bounds
+    # poses outside it, which only loosens the bound.
+    offsets = 2 * max(window.half_size_m) / spec_a.resolution_m + 1
+    depth = min(params.depth, max(1, math.ceil(math.log2(offsets))))
+    pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, depth)
     empty = MergeDecision(
         False, "", None, 0.0, 0.0, 0, len(points), 0.0, math.nan, spec_a.resolution_m
     )
@@ -166,7 +194,6 @@ def find_merge(
             reason=f"too little overlap: B has {len(points)} surface points, "
             f"{params.min_matched_points} needed on A's surfaces",
         )
-    window = SearchWindow.covering(spec_a, points)
     # The best pose that A's free space does not contradict: one that puts B's walls
     # where A saw nothing is passed over for the next best (kept with its count).
     contradicted: list[tuple[Match, int]] = []

@@ -4,18 +4,25 @@ frame per robot until the data places them, then one frame for the robots merged
 Each robot starts at the origin of its own frame, and nothing tells the server where that
 frame lies. Until it is merged, a robot has a server of its own
 (:class:`~acslam.pipeline.server.Server`): its SLAM, its map, its frontiers and its plans.
-Every ``merge_period_s`` each pair of frames whose maps grew by ``SEARCH_AGAIN_GROWTH``
-since their last search is searched (:func:`~acslam.mapping.merge.find_merge`: one
-frame's walls over the whole of the other's map at every heading, accepted only when
-verified). A wrong merge is worse than a late one, and one place can look just like
-another: two robots that each saw one room of a dungeon matched the rooms 13 m apart, and
-in an office floor of like offices (IPA office_e) a match 24 m off kept gaining matched
-walls as both robots explored. So a match is only a candidate until what the walls
-cannot tell bears it out: the robots' LiDARs see each other (:func:`sighting`). Where the
-candidate puts a robot of the other frame in a robot's view, a small object must stand; a
-scan that runs through that place refutes the candidate. Robots seen where it puts them at
-places ``SIGHTINGS_APART_M`` apart confirm it: a pillar or a door frame can pass for a
-robot once (in office_e one did, and merged a frame 10 m off), but does not move with it.
+Two frames are placed by two kinds of evidence together: a robot of one seen by a robot
+of the other, and their maps' overlap. Every ``merge_period_s``, wherever a robot's scan
+shows a small object standing where its map is free (perhaps a robot of another frame),
+each robot of each other frame is tried there: its frame's walls within ``PIN_REACH_M``
+of it are matched, at every heading, against the seeing frame's map, with the robot held
+within ``PIN_HALF_SIZE_M`` of the object (:func:`~acslam.mapping.merge.find_merge` with a
+:class:`~acslam.mapping.merge.Pin`, accepted only when verified). The sighting leaves a
+search of about a square metre instead of the whole map: a search of the whole map found
+the same merges but took up to 143 s on an office floor, where one place looks like
+another, and all of it was wasted until the robots met, since a match must be borne out
+by sightings anyway. A wrong merge is worse than a late one: two robots that each saw one
+room of a dungeon matched the rooms 13 m apart, and in an office floor of like offices
+(IPA office_e) a match 24 m off kept gaining matched walls as both robots explored. So a
+match is only a candidate until the robots' LiDARs bear it out (:func:`sighting`). Where
+the candidate puts a robot of the other frame in a robot's view, a small object must
+stand; a scan that runs through that place refutes the candidate. Robots seen where it
+puts them at places ``SIGHTINGS_APART_M`` apart confirm it: a pillar or a door frame can
+pass for a robot once (in office_e one did, and merged a frame 10 m off), but does not
+move with it.
 
 A merge refines the pose (on the maps' own cells, then by two robots' scans) and builds
 one server for both frames' robots, in the frame of the lower robot id: the other frame's
@@ -46,9 +53,9 @@ from scipy.spatial.distance import pdist
 
 from acslam.config import ScenarioConfig
 from acslam.geometry import between, compose, transform_points, wrap_angle, wrap_angles
-from acslam.grid import UNKNOWN, GridSpec
+from acslam.grid import GridSpec
 from acslam.mapping.costmap import known_window
-from acslam.mapping.merge import MergeDecision, coarsened, find_merge, on_finer_cells
+from acslam.mapping.merge import MergeDecision, Pin, coarsened, find_merge, on_finer_cells
 from acslam.mapping.scan_matching import match_scans, prepare_scan, scan_points
 from acslam.messages import LidarScan, RobotMessage, VelocityCommand
 from acslam.pipeline.server import Server
@@ -59,12 +66,14 @@ SEARCH_RESOLUTION_M = 0.1
 """Frames are searched for a merge on 0.1 m cells: a search of two floor-plan maps on
 0.05 m cells took 0.43 s per branch and bound, and a merge's pose is refined after
 (between the search's cells, then by two robots' scans)."""
-SEARCH_AGAIN_GROWTH = 0.15
-"""A pair of frames is searched again once either map knows this share more cells: a
-search of two dungeon maps of 100 m^2 costs up to 7 s (most of it passing over poses
-that put walls in free space), and little new evidence changes little."""
-SEEN_SEARCH_PERIOD_S = 6.0
-"""While a robot sees something moving, its frame's pairs are searched this often."""
+PIN_REACH_M = 10.0
+"""Where a robot is seen, its frame's walls within this of it are matched against the
+seeing frame's map: about what both robots' LiDARs (8 m) saw where they met. All of an
+office floor's walls (IPA office_e, 60 m across) made each search of many seconds."""
+PIN_HALF_SIZE_M = 0.5
+"""A robot seen as a small object stands within this (per axis) of where the search puts
+it: the object's centre is guessed one radius behind its returns, and the seen robot's
+pose and the scan are a cycle apart at most."""
 MERGED_START_SIGMAS = np.array([0.1, 0.1, 0.02])
 """``[x, y, theta]`` sigmas (m, rad) of a start a merge placed. The merge fits the two
 maps where they overlap, after the merged robot drifted on its own; a start held as
@@ -184,10 +193,8 @@ class FramedServer:
         self._lost: dict[int, float] = {}
         self._merges: list[FrameMerge] = []
         self._merge_tries = Periodic(config.algorithms.server.merge_period_s)
-        # Per pair of frames, the known cells of each map when last searched and when,
-        # and the candidate merge awaiting confirmation with where (in the first frame)
-        # robots were seen where it puts them.
-        self._searched: dict[tuple[str, str], tuple[tuple[int, int], float]] = {}
+        # Per pair of frames, the candidate merge awaiting confirmation with where (in the
+        # first frame) robots were seen where it puts them.
         self._candidates: dict[tuple[str, str], tuple[MergeDecision, list[np.ndarray]]] = {}
         self._snapshots = [frame.server.snapshot(0.0) for frame in self._frames]
         self._timings_s: dict[str, float] = {}
@@ -241,27 +248,46 @@ class FramedServer:
     # ------------------------------------------------------------------ merging
 
     def _merge(self, now_s: float) -> None:
-        """Look at every pair of frames: a candidate merge the robots now see each other
-        by is taken; a pair whose maps grew by ``SEARCH_AGAIN_GROWTH`` since it was last
-        searched is searched again. The first merge taken ends the look (the frames
-        change; the rest wait for the next)."""
+        """Look at every pair of frames: where a robot of one sees a small object that a
+        robot of the other could be, search there (:meth:`_pinned_search`); weigh the
+        match found, or else the pair's candidate. The first merge taken ends the look
+        (the frames change; the rest wait for the next)."""
         known = [_known_part(s, self._spec) for s in self._snapshots]
-        sizes = [int(np.count_nonzero(values != UNKNOWN)) for values, _ in known]
-        seeing = [frame.server.sees_moving_object() for frame in self._frames]
+        seen = [frame.server.moving_objects_m() for frame in self._frames]
         for a in range(len(self._frames)):
             for b in range(a + 1, len(self._frames)):
                 pair = (self._frames[a].name, self._frames[b].name)
-                kept = self._candidates.get(pair)
-                if kept is not None and self._weigh(pair, a, b, kept[0], known, now_s):
+                decision = self._pinned_search(a, b, seen, known)
+                if decision is None and pair in self._candidates:
+                    decision = self._candidates[pair][0]
+                if decision is not None and self._weigh(pair, a, b, decision, known, now_s):
                     return
-                if not self._search_due(pair, (sizes[a], sizes[b]), seeing[a] or seeing[b], now_s):
-                    continue
-                self._searched[pair] = ((sizes[a], sizes[b]), now_s)
-                decision = find_merge(*_search_grid(known[a]), *_search_grid(known[b]))
-                if not decision.accepted:
-                    self._candidates.pop(pair, None)
-                elif self._weigh(pair, a, b, decision, known, now_s):
-                    return
+
+    def _pinned_search(
+        self,
+        a: int,
+        b: int,
+        seen: list[np.ndarray],
+        known: list[tuple[np.ndarray, GridSpec]],
+    ) -> MergeDecision | None:
+        """The best accepted match of frame ``b``'s map in frame ``a``'s among the poses
+        that put a robot of one frame where a robot of the other sees a small object
+        (within ``PIN_HALF_SIZE_M``, at every heading); None if no sighting gives one."""
+        pins = [
+            Pin(xy, pose[:2], PIN_HALF_SIZE_M, PIN_REACH_M)
+            for xy in seen[a]
+            for pose in np.asarray(self._snapshots[b].poses)
+        ] + [
+            Pin(pose[:2], xy, PIN_HALF_SIZE_M, PIN_REACH_M)
+            for xy in seen[b]
+            for pose in np.asarray(self._snapshots[a].poses)
+        ]  # fmt: skip
+        if not pins:
+            return None
+        grid_a, grid_b = _search_grid(known[a]), _search_grid(known[b])
+        decisions = [find_merge(*grid_a, *grid_b, pin=pin) for pin in pins]
+        accepted = [d for d in decisions if d.accepted]
+        return max(accepted, key=lambda d: d.score) if accepted else None
 
     def _weigh(
         self,
@@ -288,23 +314,6 @@ class FramedServer:
             return True
         self._candidates[pair] = (decision, sighted)
         return False
-
-    def _search_due(
-        self, pair: tuple[str, str], sizes: tuple[int, int], seeing: bool, now_s: float
-    ) -> bool:
-        """A pair is searched again once either map grew by ``SEARCH_AGAIN_GROWTH``, or
-        every ``SEEN_SEARCH_PERIOD_S`` while one of its robots sees something moving where
-        its map is free (perhaps a robot of the other frame: a match then can be borne
-        out by a sighting at once)."""
-        last = self._searched.get(pair)
-        if last is None:
-            return True
-        before, searched_s = last
-        grown = any(
-            size >= (1 + SEARCH_AGAIN_GROWTH) * known
-            for size, known in zip(sizes, before, strict=True)
-        )
-        return grown or (seeing and now_s - searched_s >= SEEN_SEARCH_PERIOD_S)
 
     def _sightings(self, a: int, b: int, decision: MergeDecision) -> tuple[list[np.ndarray], int]:
         """Where (in frame ``a``) the two frames' latest scans show the other frame's
@@ -407,9 +416,8 @@ class FramedServer:
         self._frames[a] = merged
         del self._frames[b]
         # Frame a keeps its name and coordinates; what was found about frame b is gone.
-        for table in (self._searched, self._candidates):
-            for pair in [p for p in table if second.name in p]:
-                del table[pair]
+        for pair in [p for p in self._candidates if second.name in p]:
+            del self._candidates[pair]
         if len(self._frames) == 1:
             merged.history.clear()
         self._snapshots[a] = merged.server.snapshot(now_s)

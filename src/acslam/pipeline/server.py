@@ -68,6 +68,9 @@ UNEXPLAINED_M = 0.1
 MOVING_OBJECT_RETURNS = 3
 """Returns in the map's free space that show something moved in (a robot 0.21 m across
 gives 3 or more at 1 degree within 4 m)."""
+SMALL_OBJECT_SLACK_M = 0.15
+"""How much wider than a robot a run of unexplained returns may be and still be one: the
+scan's noise and the viewer's motion during the sweep."""
 MAP_LANE = "map"
 """Jobs of the mapper, the frontier detector and the clusterer (see acslam.pipeline.jobs)."""
 DECISION_LANE = "decisions"
@@ -148,6 +151,27 @@ def costmap_reach_m(config: ScenarioConfig, spec: GridSpec) -> float:
         )
         + 2 * math.sqrt(2.0) * spec.resolution_m
     )
+
+
+def small_objects_m(
+    viewer_pose: np.ndarray, ends_m: np.ndarray, unexplained: np.ndarray, radius_m: float
+) -> np.ndarray:
+    """(K, 2) centres of the small objects one scan shows: runs of at least
+    ``MOVING_OBJECT_RETURNS`` consecutive beams that end where the map does not explain,
+    no wider than a robot (with ``SMALL_OBJECT_SLACK_M``). The beams end on the object's
+    near side, so its centre is taken one radius behind their mean, along the view."""
+    centres = []
+    edges = np.diff(np.concatenate([[0], unexplained.astype(np.int8), [0]]))
+    for first, end in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True):
+        run = ends_m[first:end]
+        if len(run) < MOVING_OBJECT_RETURNS:
+            continue
+        if np.hypot(*np.ptp(run, axis=0)) > 2 * radius_m + SMALL_OBJECT_SLACK_M:
+            continue
+        mean = run.mean(axis=0)
+        view = mean - viewer_pose[:2]
+        centres.append(mean + radius_m * view / np.hypot(*view))
+    return np.array(centres).reshape(-1, 2)
 
 
 class Server:
@@ -321,19 +345,27 @@ class Server:
         sensor pose; kept only with ``scan_obstacles``."""
         return self._latest_scans.get(robot_id)
 
-    def sees_moving_object(self) -> bool:
-        """Whether a robot's latest scan ends where the map was seen free, away from its
-        obstacles: a robot this server does not know, or anything else that moved in
-        (``scan_obstacles`` only)."""
-        if self._values is None or self._field is None or not self._latest_scans:
-            return False
-        points = self._returns_within_reach()
-        cells = self._map_spec.world_to_cell(points)
-        inside = self._map_spec.contains(cells)
-        in_free = np.zeros(len(points), dtype=bool)
-        in_free[inside] = self._values[cells[inside, 0], cells[inside, 1]] == FREE
-        clear = self._field.value(points) > UNEXPLAINED_M
-        return np.count_nonzero(in_free & clear) >= MOVING_OBJECT_RETURNS
+    def moving_objects_m(self) -> np.ndarray:
+        """(K, 2) where the robots' latest scans show a small object standing where the map
+        was seen free, away from its obstacles: a robot this server does not know, or
+        anything else that moved in (``scan_obstacles`` only; see :func:`small_objects_m`)."""
+        found = [np.zeros((0, 2))]
+        if self._values is None or self._field is None:
+            return found[0]
+        for pose, scan in self._latest_scans.values():
+            angles = scan.angles + pose[2]
+            with np.errstate(invalid="ignore"):
+                ends = pose[:2] + scan.ranges[:, None] * np.column_stack(
+                    [np.cos(angles), np.sin(angles)]
+                )
+            returned = np.isfinite(scan.ranges) & (scan.ranges > 0)
+            cells = self._map_spec.world_to_cell(np.where(returned[:, None], ends, pose[:2]))
+            inside = returned & self._map_spec.contains(cells)
+            unexplained = np.zeros(len(ends), dtype=bool)
+            unexplained[inside] = self._values[cells[inside, 0], cells[inside, 1]] == FREE
+            unexplained[inside] &= self._field.value(ends[inside]) > UNEXPLAINED_M
+            found.append(small_objects_m(pose, ends, unexplained, self._config.robots.radius_m))
+        return np.vstack(found)
 
     def _returns_within_reach(self) -> np.ndarray:
         """(K, 2) returns of the robots' latest scans within the local planners' reach."""
