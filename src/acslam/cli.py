@@ -519,8 +519,8 @@ def run_command(
         scenario = scenario.with_patrol(patrol_s)
     if unknown_starts:
         scenario = scenario.with_unknown_starts()
-    if distributed:
-        scenario.require_known_starts("--distributed runs")
+    if ros2:
+        scenario.require_known_starts("ROS 2 served runs")
     if (viz != "none" or record is not None) and scenario.config.robots.relative_starts == (
         "unknown"
     ):
@@ -1342,6 +1342,13 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     is_flag=True,
     help="--ros2: publish map -> <ns>/odom on /tf instead of map -> odom on /<ns>/tf.",
 )
+@click.option(
+    "--unknown-starts",
+    is_flag=True,
+    help="The server is not told where the robots start: each robot begins in its own "
+    "frame, and the frames merge where the data places them (sets "
+    "robots.relative_starts: unknown; not with --ros2 yet).",
+)
 def serve_command(
     scenario_name: str,
     team: int | list[str] | None,
@@ -1363,6 +1370,7 @@ def serve_command(
     cmd_vel_type: str,
     laser_mount: tuple[float, float, float] | None,
     global_tf: bool,
+    unknown_starts: bool,
 ) -> None:
     """Run the server in wall-clock time for robots connecting over Zenoh (acslam's own
     protocol, or with --ros2 ROS 2 robots through rmw_zenoh or the DDS bridge)."""
@@ -1376,6 +1384,10 @@ def serve_command(
     if ros2 and listen is None and not connect:
         raise click.UsageError("--ros2 needs --connect (the robots' router) or --listen")
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
+    if unknown_starts:
+        scenario = scenario.with_unknown_starts()
+    if ros2:
+        scenario.require_known_starts("ROS 2 served runs")
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"

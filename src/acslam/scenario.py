@@ -70,8 +70,8 @@ class Scenario:
             raise ConfigError(
                 self.source,
                 "robots.relative_starts",
-                f"'unknown' runs in process only (acslam run without --distributed, acslam "
-                f"experiments), not in {runs}",
+                f"'unknown' runs in process and with acslam's own robots (acslam run, "
+                f"--distributed, acslam serve, acslam experiments), not in {runs}",
             )
 
     def with_algorithms(

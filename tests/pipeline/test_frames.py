@@ -4,6 +4,8 @@ and not at a decoy's, with the merged frame what known starts would have made.""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from concurrent.futures import Future
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,14 @@ from acslam.experiments.grid import builtin_grid, expand
 from acslam.geometry import between
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan
-from acslam.pipeline.frames import frame_grid_spec, sighting
+from acslam.pipeline.frames import (
+    CATCH_UP_IN_CYCLE,
+    MERGE_LANE,
+    MERGED_START_SIGMAS,
+    FramedServer,
+    frame_grid_spec,
+    sighting,
+)
 from acslam.pipeline.server import Server, small_objects_m
 from acslam.planning.field import DistanceField, ObstacleField
 from acslam.runner import run_exploration
@@ -137,16 +146,30 @@ def test_the_same_seed_merges_the_same_way(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("extra", "says"),
     [
-        (["--distributed"], "robots.relative_starts"),
+        (["--distributed", "--ros2"], "robots.relative_starts"),
         (["--record", "run.mcap"], "not with unknown starts"),
         (["--viz", "rerun"], "not with unknown starts"),
     ],
 )
-def test_what_shows_one_team_frame_refuses_unknown_starts(extra: list[str], says: str) -> None:
+def test_what_shows_one_team_frame_or_speaks_ros2_refuses_unknown_starts(
+    extra: list[str], says: str
+) -> None:
     result = CliRunner().invoke(
         cli, ["run", "--scenario", "thesis-exp1", "--unknown-starts", *extra]
     )
     assert result.exit_code != 0 and says in result.output
+
+
+def test_a_ros2_served_run_refuses_unknown_starts_before_making_its_folder(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "run"
+    result = CliRunner().invoke(
+        cli,
+        ["serve", "--ros2", "--connect", "tcp/127.0.0.1:1", "--unknown-starts", "--out", str(out)],
+    )
+    assert result.exit_code == 1 and "robots.relative_starts" in result.output
+    assert not out.exists()
 
 
 def test_a_sweep_without_known_starts_keeps_its_runs_apart() -> None:
@@ -209,3 +232,74 @@ def test_a_robot_in_free_space_is_seen_near_its_centre_and_a_wall_is_not_a_robot
     assert small_objects_m(viewer, ends, wall, radius_m).shape == (0, 2)
     two = np.flatnonzero(hits)[:2]
     assert small_objects_m(viewer, ends, np.isin(np.arange(360), two), radius_m).shape == (0, 2)
+
+
+class _LateFuture(Future):
+    """A job's result, said to be ready only at the ``polls``-th look."""
+
+    def __init__(self, value: object, polls: int) -> None:
+        super().__init__()
+        self._value, self._polls = value, polls
+        if polls <= 0:
+            self.set_result(value)
+
+    def done(self) -> bool:
+        self._polls -= 1
+        if self._polls <= 0 and not super().done():
+            self.set_result(self._value)
+        return super().done()
+
+
+class _LateMergeLane:
+    """Jobs as in process, but the merge lane's jobs that found a merge are ready only
+    ``delays`` control cycles after they were scheduled: a look and a catch-up that ran
+    beside the control loop (as in a served run)."""
+
+    def __init__(self, delays: list[int]) -> None:
+        self._delays = delays
+
+    def submit(self, lane: str, job: Callable[[], object]) -> Future:
+        result = job()
+        if lane != MERGE_LANE or result is None or not self._delays:
+            return _LateFuture(result, 0)
+        return _LateFuture(result, self._delays.pop(0))
+
+    def close(self) -> None:
+        return None
+
+
+def test_a_merge_found_beside_the_control_loop_is_taken_in_caught_up_exactly() -> None:
+    """The look that confirms the merge is ready 25 cycles after its evidence, and the
+    catch-up of those 25 cycles 5 cycles later (still more than CATCH_UP_IN_CYCLE behind,
+    so it went to the merge lane): the frame then taken in holds exactly what one server
+    with the merged starts, fed every message at once, holds."""
+    scenario = load_scenario("thesis-exp1", robots=2).with_unknown_starts()
+    config = scenario.config
+    jobs = _LateMergeLane([25, 5])
+    server = FramedServer(config, 2, scenario.world.spec, lambda: jobs)
+    substeps = round(config.algorithms.planning.control_period_s / config.sim.dt_s)
+    source = SimulatedSource(scenario.simulator(), substeps)
+    history = []
+    snapshot = server.step([], 0.0)
+    while not snapshot.merges and source.time_s < 20.0:
+        messages = source.receive()
+        history.append((source.time_s, messages))
+        snapshot = server.step(messages, source.time_s)
+        source.deliver(snapshot)
+        source.advance()
+    (merge,) = snapshot.merges
+    # The look is asked in the cycle that scheduled it, then 24 more; the catch-up 5.
+    assert merge.time_s - merge.poses_time_s == pytest.approx(2.9)
+    assert CATCH_UP_IN_CYCLE < 25
+    (frame,) = snapshot.frames
+    reference = Server(
+        config, frame.starts, frame_grid_spec(scenario.world.spec),
+        start_sigmas={1: MERGED_START_SIGMAS}, scan_obstacles=True,
+    )  # fmt: skip
+    for time_s, messages in history:
+        reference.catch_up(sorted(messages, key=lambda m: m.robot_id), time_s)
+    for robot in range(2):
+        stamps, poses = frame.snapshot.localization.trajectory(robot)
+        again_stamps, again_poses = reference.snapshot(0.0).localization.trajectory(robot)
+        np.testing.assert_array_equal(stamps, again_stamps)
+        np.testing.assert_array_equal(poses, again_poses)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from acslam.pipeline.frames import FramedServer
 from acslam.pipeline.jobs import BackgroundJobs
 from acslam.pipeline.server import Server
 from acslam.runner import (
@@ -66,18 +67,24 @@ def serve(
     """Serve robots on ``listen`` until explored, all lost, or ``max_time_s``; returns
     the metrics written to ``out_dir``."""
     options = options or ServeOptions()
-    scenario.require_known_starts("served runs")
     session = open_session(listen=listen)
     out_dir = start_run_folder(out_dir, scenario)
     count = scenario.robot_count
     try:
         endpoint = ZenohServerEndpoint(session, count)
         starts, missing = _wait_for_robots(endpoint, scenario, options.startup_timeout_s)
-        server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
+        server: Server | FramedServer
+        if scenario.config.robots.relative_starts == "unknown":
+            # The heartbeats' start poses only score the run: the server is not told them.
+            server = FramedServer(scenario.config, count, scenario.world.spec, BackgroundJobs)
+            true_starts = starts
+        else:
+            server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
+            true_starts = None
         for robot in missing:
             server.mark_lost(robot, 0.0)
             endpoint.ignore(robot)
-        log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
+        log = RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress, true_starts)
         endpoint.reset_stats()
         period_s = scenario.config.algorithms.planning.control_period_s
         source = ZenohSource(endpoint, period_s, options.heartbeat_timeout_s)

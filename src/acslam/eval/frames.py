@@ -110,8 +110,8 @@ def merge_metrics(
 
     A merge's ``error_m`` is at the merged frame's origin, the start of a robot that then
     drifted alone before the maps met (a heading drift of 0.02 rad moves a start 10 m
-    away by 0.2 m); ``error_at_robots_m`` is where the merge put the merged robots at
-    that time against where they truly stood (``truth``: ``[t, x, y, theta]`` rows per
+    away by 0.2 m); ``error_at_robots_m`` is where the merge put the merged robots
+    against where they truly stood then (``truth``: ``[t, x, y, theta]`` rows per
     robot), which a merge of the wrong places gets wrong by metres."""
     merges = []
     for merge in snapshot.merges:
@@ -121,7 +121,7 @@ def merge_metrics(
         error_m, error_rad = pose_error(merge.decision.pose, true)
         placed = transform_points(merge.decision.pose, merge.merged_poses[:, :2])
         stood = np.array(
-            [_true_xy(truth[r], merge.time_s) for r in merge.merged_robot_ids]
+            [_true_xy(truth[r], merge.poses_time_s) for r in merge.merged_robot_ids]
         ).reshape(-1, 2)
         stood_in_frame = transform_points(between(true_starts[into], np.zeros(3)), stood)
         at_robots_m = float(np.max(np.hypot(*(placed - stood_in_frame).T)))

@@ -11,8 +11,9 @@ its scheduled simulated time.
 Jobs go to a *lane*: the jobs of one lane run one at a time, in the order they were
 scheduled, so a lane's stages need no locks (the server's ``map`` lane holds the mapper,
 the frontier detector and the clusterer, its ``decisions`` lane the allocator and the
-global planner, the localizer's ``loops`` lane loop-closure matching). Lanes run side by
-side, so a slow allocation does not hold up the map.
+global planner, the localizer's ``loops`` lane loop-closure matching, and with unknown
+starts the framed server's ``merges`` lane its looks for a merge). Lanes run side by side,
+so a slow allocation does not hold up the map.
 Both kinds of jobs give a :class:`~concurrent.futures.Future`; the server takes a result
 when ``done()``.
 """
