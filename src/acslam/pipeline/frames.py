@@ -24,7 +24,7 @@ puts them at places ``SIGHTINGS_APART_M`` apart confirm it: a pillar or a door f
 pass for a robot once (in office_e one did, and merged a frame 10 m off), but does not
 move with it.
 
-A merge refines the pose (on the maps' own cells, then by two robots' scans) and builds
+A merge refines the pose (on the maps' own cells, then between cells) and builds
 one server for both frames' robots, in the frame of the lower robot id: the other frame's
 starts carried through the pose, and every message its robots sent replayed into the new
 server's SLAM and map (:meth:`~acslam.pipeline.server.Server.catch_up`), so the merged
@@ -58,7 +58,6 @@ from acslam.geometry import between, compose, transform_points, wrap_angle, wrap
 from acslam.grid import GridSpec
 from acslam.mapping.costmap import known_window
 from acslam.mapping.merge import MergeDecision, Pin, coarsened, find_merge, on_finer_cells
-from acslam.mapping.scan_matching import match_scans, prepare_scan, scan_points
 from acslam.messages import LidarScan, RobotMessage, VelocityCommand
 from acslam.pipeline.jobs import InlineJobs, Jobs
 from acslam.pipeline.server import Server
@@ -89,9 +88,9 @@ MERGE_LANE = "merges"
 searches, and the catch-up of a merged frame's server on every message its robots sent
 (seconds, growing with the run), go on beside the control loop; the merged frame is taken
 in at the first cycle after, caught up on the cycles in between."""
-SCAN_REFINE_MAX_SHIFT_M = 0.3
-SCAN_REFINE_MAX_SHIFT_RAD = math.radians(5.0)
-"""Two scans move a merge's pose by less than this, or not at all."""
+SAME_CANDIDATE_M = 0.3
+SAME_CANDIDATE_RAD = math.radians(5.0)
+"""Two looks found the same candidate when their poses are this close."""
 
 
 def frame_name(base_robot_id: int) -> str:
@@ -344,8 +343,8 @@ class FramedServer:
         assert decision.pose is not None
         if decision.resolution_m > first.known[1].resolution_m:
             decision = on_finer_cells(*first.known, *second.known, decision)
-        pose = _scan_refined(first, second, decision.pose, self._config)
-        decision = replace(decision, pose=pose)
+        pose = decision.pose
+        assert pose is not None
         starts = {r: s for r, s in zip(first.frame.robot_ids, first.frame.starts, strict=True)}
         for robot_id, start in zip(second.frame.robot_ids, second.frame.starts, strict=True):
             starts[robot_id] = compose(pose, start)
@@ -538,51 +537,6 @@ def _sightings(
     return seen, missed
 
 
-def _scan_refined(
-    a: _Evidence, b: _Evidence, pose_b_in_a: np.ndarray, config: ScenarioConfig
-) -> np.ndarray:
-    """The merge's pose from the latest scans of the two robots (one of each frame) that
-    the merge puts nearest each other, matched to each other, when they agree well: two
-    scans fit to about a centimetre, where two maps fit each other to a cell or two, and a
-    frame merged that far off pulls its robots' trajectories after it (thesis-exp1, two
-    robots: 4.7 cm off left 6 cm of error, 1.1 cm off 1.2 cm, where known starts leave
-    0.6 cm). A robot's scan fitted to the other frame's map instead did worse (3.5 cm):
-    the map's walls are cells."""
-    matching = config.algorithms.scan_matching
-    best: tuple[float, np.ndarray, LidarScan, np.ndarray, LidarScan] | None = None
-    for scan_a in a.scans:
-        for scan_b in b.scans:
-            if scan_a is None or scan_b is None:
-                continue
-            placed_b = compose(pose_b_in_a, scan_b[0])
-            gap_m = float(np.hypot(*(placed_b[:2] - scan_a[0][:2])))
-            if best is None or gap_m < best[0]:
-                best = (gap_m, scan_a[0], scan_a[1], placed_b, scan_b[1])
-    if best is None:
-        return pose_b_in_a
-    _, sensor_a, found_a, placed_b, found_b = best
-    guess = between(sensor_a, placed_b)
-    result = match_scans(
-        prepare_scan(found_a.angles, found_a.ranges, matching),
-        scan_points(found_b.angles, found_b.ranges, matching),
-        guess,
-        matching,
-    )
-    shift = result.relative - guess
-    if not (
-        result.converged
-        and result.inlier_ratio >= SCAN_REFINE_MIN_INLIERS
-        and np.hypot(shift[0], shift[1]) < SCAN_REFINE_MAX_SHIFT_M
-        and abs(wrap_angle(shift[2])) < SCAN_REFINE_MAX_SHIFT_RAD
-    ):
-        return pose_b_in_a
-    # B's frame in A's: A's sensor, the matched offset, back from B's sensor in B.
-    sensor_b = between(pose_b_in_a, placed_b)
-    return compose(compose(sensor_a, result.relative), between(sensor_b, np.zeros(3)))
-
-
-SCAN_REFINE_MIN_INLIERS = 0.6
-"""The two scans that refine a merge must agree on this share of their points."""
 SIGHTINGS_APART_M = 0.5
 """A candidate merges once robots were seen where it puts them at places this far apart."""
 SIGHTING_TOLERANCE_M = 0.15
@@ -626,12 +580,11 @@ def sighting(
 
 
 def _same_pose(kept: MergeDecision, decision: MergeDecision) -> bool:
-    """Two searches found the same candidate (within the scans' refinement bound)."""
+    """Two looks found the same candidate (``SAME_CANDIDATE_M``, ``SAME_CANDIDATE_RAD``)."""
     assert kept.pose is not None and decision.pose is not None
     gap = np.asarray(decision.pose) - kept.pose
     return bool(
-        np.hypot(gap[0], gap[1]) < SCAN_REFINE_MAX_SHIFT_M
-        and abs(wrap_angle(gap[2])) < SCAN_REFINE_MAX_SHIFT_RAD
+        np.hypot(gap[0], gap[1]) < SAME_CANDIDATE_M and abs(wrap_angle(gap[2])) < SAME_CANDIDATE_RAD
     )
 
 
