@@ -114,6 +114,20 @@ def test_maps_that_do_not_overlap_are_not_merged() -> None:
     assert not decision.accepted
 
 
+def test_a_map_without_walls_is_refused_with_its_reason() -> None:
+    """Nothing to match, with or without a pin: one clear reason, no search."""
+    spec = GridSpec(0.0, 0.0, RESOLUTION_M, 40, 40)
+    empty_room = np.full(spec.shape, FREE, dtype=np.int8)
+    decision = find_merge(empty_room, spec, empty_room, spec)
+    assert not decision.accepted and decision.reason == "map B has no occupied cells to match"
+    building_values, building_spec = two_rooms()
+    pin = Pin(np.zeros(2), np.array([40.0, 40.0]), 0.5, 10.0)  # far from B's walls
+    decision = find_merge(
+        building_values, building_spec, building_values, building_spec, pin=pin
+    )  # fmt: skip
+    assert not decision.accepted and "within 10 m of the pinned point" in decision.reason
+
+
 def symmetric_hall(pillar: bool) -> tuple[np.ndarray, GridSpec]:
     """A corridor with the same room at each end, turned by 180 degrees about the centre
     (10, 5); ``pillar`` puts a 0.3 m pillar in the east room only, which breaks the

@@ -169,11 +169,24 @@ def find_merge(
     ``pin`` puts it, and verified."""
     params = params or MergeParams()
     points = surface_points(values_b, spec_b, params.point_spacing_m)
+    if pin is not None:
+        points = points[np.hypot(*(points - pin.b_xy_m).T) <= pin.reach_m]
+    empty = MergeDecision(
+        False, "", None, 0.0, 0.0, 0, len(points), 0.0, math.nan, spec_a.resolution_m
+    )
+    if len(points) == 0:
+        near = "" if pin is None else f" within {pin.reach_m:g} m of the pinned point"
+        return replace(empty, reason=f"map B has no occupied cells to match{near}")
+    if len(points) < params.min_matched_points:
+        return replace(
+            empty,
+            reason=f"too little overlap: B has {len(points)} surface points, "
+            f"{params.min_matched_points} needed on A's surfaces",
+        )
     if pin is None:
         window = SearchWindow.covering(spec_a, points)
     else:
         window = SearchWindow.pinned(pin.b_xy_m, pin.a_xy_m, pin.half_size_m)
-        points = points[np.hypot(*(points - pin.b_xy_m).T) <= pin.reach_m]
         # Every pose searched keeps those points within this of a_xy_m: A beyond it
         # (with a margin where the field still feels a wall) changes nothing.
         crop = window_around(spec_a, pin.a_xy_m, pin.reach_m + pin.half_size_m + 4 * params.sigma_m)
@@ -183,17 +196,6 @@ def find_merge(
     offsets = 2 * max(window.half_size_m) / spec_a.resolution_m + 1
     depth = min(params.depth, max(1, math.ceil(math.log2(offsets))))
     pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, depth)
-    empty = MergeDecision(
-        False, "", None, 0.0, 0.0, 0, len(points), 0.0, math.nan, spec_a.resolution_m
-    )
-    if len(points) == 0:
-        return replace(empty, reason="map B has no occupied cells to match")
-    if len(points) < params.min_matched_points:
-        return replace(
-            empty,
-            reason=f"too little overlap: B has {len(points)} surface points, "
-            f"{params.min_matched_points} needed on A's surfaces",
-        )
     # The best pose that A's free space does not contradict: one that puts B's walls
     # where A saw nothing is passed over for the next best (kept with its count).
     contradicted: list[tuple[Match, int]] = []
