@@ -61,6 +61,17 @@ def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ rot.T + pose[:2]
 
 
+def beam_ends(pose: np.ndarray, angles: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    """(N, 2) where beams at ``angles`` (rad, sensor frame) of ``ranges`` (m) end, seen
+    from the sensor ``pose``; a beam of infinite range ends at infinity (or NaN on an
+    axis it does not move along)."""
+    headings = np.asarray(angles) + pose[2]
+    with np.errstate(invalid="ignore"):
+        return pose[:2] + np.asarray(ranges)[:, None] * np.column_stack(
+            [np.cos(headings), np.sin(headings)]
+        )
+
+
 def fit_rigid(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The pose ``[x, y, theta]`` whose :func:`transform_points` lays the (N, 2) ``source``
     points closest to their ``target`` points in least squares (Umeyama 1991 without

@@ -344,7 +344,6 @@ class FramedServer:
     ) -> _Found:
         """One server for frames ``a`` and ``b`` in ``a``'s frame, at the merge's refined
         pose, fed every message their robots sent up to the evidence (taken at ``now_s``)."""
-        assert decision.pose is not None
         if decision.resolution_m > first.known[1].resolution_m:
             decision = on_finer_cells(*first.known, *second.known, decision)
         pose = decision.pose

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from acslam.geometry import beam_ends
 from acslam.messages import (
     LandmarkObservations,
     LidarScan,
@@ -92,8 +93,7 @@ class Perception:
     def _kept(self, index: int, scan: LidarScan, pose: np.ndarray) -> KeptScan:
         valid = scan.ranges > 0
         keep = valid.copy()
-        angles = scan.angles + pose[2]
-        ends = pose[:2] + scan.ranges[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+        ends = beam_ends(pose, scan.angles, scan.ranges)
         for j in self.robot_ids:
             if j != scan.robot_id:
                 with np.errstate(invalid="ignore"):

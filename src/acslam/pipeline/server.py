@@ -42,6 +42,7 @@ from acslam.errors import NoPathError
 from acslam.exploration.clustering import FrontierCluster
 from acslam.exploration.frontiers import away_from_robots
 from acslam.exploration.patrol import Patrol
+from acslam.geometry import beam_ends
 from acslam.grid import FREE, GridSpec, Window
 from acslam.mapping.costmap import Costmap, CostmapUpdater, known_window
 from acslam.messages import LidarScan, RobotMessage, VelocityCommand
@@ -353,11 +354,7 @@ class Server:
         if self._values is None or self._field is None:
             return found[0]
         for pose, scan in self._latest_scans.values():
-            angles = scan.angles + pose[2]
-            with np.errstate(invalid="ignore"):
-                ends = pose[:2] + scan.ranges[:, None] * np.column_stack(
-                    [np.cos(angles), np.sin(angles)]
-                )
+            ends = beam_ends(pose, scan.angles, scan.ranges)
             returned = np.isfinite(scan.ranges) & (scan.ranges > 0)
             cells = self._map_spec.world_to_cell(np.where(returned[:, None], ends, pose[:2]))
             inside = returned & self._map_spec.contains(cells)
@@ -374,11 +371,7 @@ class Server:
         returns = []
         for pose, scan in self._latest_scans.values():
             near = scan.ranges < reach_m
-            angles = scan.angles[near] + pose[2]
-            returns.append(
-                pose[:2]
-                + scan.ranges[near, None] * np.column_stack([np.cos(angles), np.sin(angles)])
-            )
+            returns.append(beam_ends(pose, scan.angles[near], scan.ranges[near]))
         return np.vstack(returns).reshape(-1, 2)
 
     def _unexplained_returns(self, field: DistanceField) -> np.ndarray:

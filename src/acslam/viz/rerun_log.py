@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from acslam.errors import VizError
+from acslam.geometry import beam_ends
 from acslam.grid import GridSpec
 from acslam.messages import LidarScan, RobotMessage
 from acslam.pipeline.snapshot import Snapshot
@@ -121,8 +122,7 @@ class RerunLogger:
 def _returns(scan: LidarScan, pose: np.ndarray) -> np.ndarray:
     """World coordinates of the scan's returns (finite, valid ranges) seen from ``pose``."""
     hit = np.isfinite(scan.ranges) & (scan.ranges > 0)
-    angles = scan.angles[hit] + pose[2]
-    return pose[:2] + scan.ranges[hit, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    return beam_ends(pose, scan.angles[hit], scan.ranges[hit])
 
 
 def _grid(cells: np.ndarray, spec: GridSpec, colormap: str) -> rr.GridMap:
