@@ -10,11 +10,13 @@ from datetime import UTC, datetime, timedelta
 from html.parser import HTMLParser
 from importlib.metadata import version
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from PIL import Image
 
+from acslam.cli import _progress
 from acslam.eval.plotting import plt, save_figure
 from acslam.provenance import SOURCE_ROOT
 
@@ -184,6 +186,24 @@ def test_explored_area_table_matches_metrics(short_run) -> None:
     )
     # The area figure ends at the team map's mapped area, sampled each simulated second.
     assert coverage["mapped_area_m2"] > coverage["mapped_reachable_area_m2"] > 0
+
+
+def test_piped_progress_counts_the_frames_still_apart(capsys: pytest.CaptureFixture) -> None:
+    """With unknown starts a piped progress line says how many frames are still apart;
+    with one team frame (known starts: no frames) it says nothing of frames."""
+    apart = SimpleNamespace(frontier_cells=np.zeros((5, 2)), frames=("a", "b", "c"))
+    known = SimpleNamespace(frontier_cells=np.zeros((1, 2)), frames=())
+    with _progress("run", 100.0) as show:
+        show(apart, 10.0, 12.5)
+        show(known, 20.0, 13.0)
+    first, second = capsys.readouterr().out.splitlines()
+    assert first.startswith(
+        "run: 10.0 of 100 s simulated (10 %), 12.5 m² mapped, 5 frontier cells, 3 frames, "
+    )
+    assert re.fullmatch(
+        r"run: 20\.0 of 100 s simulated \(20 %\), 13\.0 m² mapped, 1 frontier cell, \d+ s elapsed",
+        second,
+    )
 
 
 def test_console_summary_and_piped_progress_have_units(short_run) -> None:
