@@ -155,6 +155,39 @@ def drive(
     return np.array(history).reshape(-1, len(poses), 3)
 
 
+def hold_place_beside_a_wall(heading_rad: float, duration_s: float = 3.0) -> np.ndarray:
+    """A robot without a path holds its place as its goal (as the server plans it), 0.12 m
+    from a wall (x < 0) whose obstacle factors push it off; its x at every step."""
+    grid = GridSpec(-1.0, -2.0, 0.05, 80, 60)
+    x_m = grid.cell_to_world(np.argwhere(np.ones(grid.shape)))[:, 0].reshape(grid.shape)
+    field = DistanceField(np.maximum(x_m, 0.0), grid)
+    planner = new_planner()
+    pose = (ROBOTS.radius_m + 0.12, 0.0, heading_rad)
+    velocity = (0.0, 0.0)
+    substeps = round(PLANNING.control_period_s / SIM_DT_S)
+    xs = [pose[0]]
+    for _ in range(round(duration_s / PLANNING.control_period_s)):
+        state = RobotState(*pose, *velocity)
+        ((v, omega),) = planner.plan([state], [state.xy_m], field)
+        for _ in range(substeps):
+            velocity = limit_command(v, omega, *velocity, ROBOTS, SIM_DT_S)
+            pose = step_pose(*pose, *velocity, SIM_DT_S)
+            xs.append(pose[0])
+    return np.array(xs)
+
+
+@pytest.mark.parametrize("heading_rad", [-2.08, math.pi, 2.5, 0.3])
+def test_a_robot_holding_its_place_is_pushed_off_a_wall_and_never_into_it(
+    heading_rad: float,
+) -> None:
+    """Whichever way it faces, the robot turns to where the obstacle factors push it and
+    drives off the wall: it never comes nearer. Holding its heading and driving the
+    push's length along it, a robot facing the wall touched it after 1.5-1.8 s."""
+    xs = hold_place_beside_a_wall(heading_rad)
+    assert xs.min() >= xs[0] - 1e-9
+    assert xs[-1] > xs[0] + 0.05
+
+
 def test_two_robots_head_on_swap_positions_without_contact() -> None:
     grid = GridSpec(-4.0, -4.0, 0.05, 160, 160)
     field = DistanceField(np.full(grid.shape, 10.0), grid)
