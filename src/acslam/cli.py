@@ -519,8 +519,6 @@ def run_command(
         scenario = scenario.with_patrol(patrol_s)
     if unknown_starts:
         scenario = scenario.with_unknown_starts()
-    if ros2:
-        scenario.require_known_starts("ROS 2 served runs")
     if (viz != "none" or record is not None) and scenario.config.robots.relative_starts == (
         "unknown"
     ):
@@ -1347,7 +1345,8 @@ def bench_command(out_dir: Path, quick: bool) -> None:
     is_flag=True,
     help="The server is not told where the robots start: each robot begins in its own "
     "frame, and the frames merge where the data places them (sets "
-    "robots.relative_starts: unknown; not with --ros2 yet).",
+    "robots.relative_starts: unknown; with --ros2 an unmerged robot's frame is <ns>/map, "
+    "map stays robot 0's, and /tf_static holds every merge).",
 )
 def serve_command(
     scenario_name: str,
@@ -1386,8 +1385,6 @@ def serve_command(
     scenario = load_scenario(scenario_name, robots=robots, seed=seed)
     if unknown_starts:
         scenario = scenario.with_unknown_starts()
-    if ros2:
-        scenario.require_known_starts("ROS 2 served runs")
     if out_dir is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out_dir = Path("runs") / f"{scenario.config.name}-{stamp}-serve"

@@ -64,16 +64,6 @@ class Scenario:
         config = self.config.model_copy(update={"robots": robots, "name": name})
         return Scenario(config, self.source, self.world, self.starts, self.landmarks)
 
-    def require_known_starts(self, runs: str) -> None:
-        """Refuse unknown relative starts where the server cannot yet merge frames."""
-        if self.config.robots.relative_starts == "unknown":
-            raise ConfigError(
-                self.source,
-                "robots.relative_starts",
-                f"'unknown' runs in process and with acslam's own robots (acslam run, "
-                f"--distributed, acslam serve, acslam experiments), not in {runs}",
-            )
-
     def with_algorithms(
         self, local_planner: str | None = None, allocator: str | None = None
     ) -> Scenario:

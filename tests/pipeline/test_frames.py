@@ -146,30 +146,15 @@ def test_the_same_seed_merges_the_same_way(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("extra", "says"),
     [
-        (["--distributed", "--ros2"], "robots.relative_starts"),
         (["--record", "run.mcap"], "not with unknown starts"),
         (["--viz", "rerun"], "not with unknown starts"),
     ],
 )
-def test_what_shows_one_team_frame_or_speaks_ros2_refuses_unknown_starts(
-    extra: list[str], says: str
-) -> None:
+def test_what_shows_one_team_frame_refuses_unknown_starts(extra: list[str], says: str) -> None:
     result = CliRunner().invoke(
         cli, ["run", "--scenario", "thesis-exp1", "--unknown-starts", *extra]
     )
     assert result.exit_code != 0 and says in result.output
-
-
-def test_a_ros2_served_run_refuses_unknown_starts_before_making_its_folder(
-    tmp_path: Path,
-) -> None:
-    out = tmp_path / "run"
-    result = CliRunner().invoke(
-        cli,
-        ["serve", "--ros2", "--connect", "tcp/127.0.0.1:1", "--unknown-starts", "--out", str(out)],
-    )
-    assert result.exit_code == 1 and "robots.relative_starts" in result.output
-    assert not out.exists()
 
 
 def test_a_sweep_without_known_starts_keeps_its_runs_apart() -> None:

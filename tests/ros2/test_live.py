@@ -1,7 +1,8 @@
 """The server and simulated robots speaking ROS 2 (rmw_zenoh's wire) over loopback: a
 served run with the legacy attachment, watched by a test-side participant that checks
-the graph tokens, joins ``/map`` late and sends malformed payloads; and (slow) a whole
-exploration of thesis-exp1 with the current attachment."""
+the graph tokens, joins ``/map`` late and sends malformed payloads; a served run without
+start poses, watched for the frames its transforms and maps are in until the robots'
+frames merge; and (slow) a whole exploration of thesis-exp1 with the current attachment."""
 
 from __future__ import annotations
 
@@ -17,8 +18,12 @@ import pytest
 from zenoh import ext
 
 from acslam.distributed.launch import free_port
+from acslam.eval.frames import FALSE_MERGE_M, FALSE_MERGE_RAD
+from acslam.geometry import between, wrap_angle
 from acslam.ros2 import convert, wire
 from acslam.ros2.node import Ros2Node, Ros2Options, open_ros2_session
+from acslam.ros2.source import MAP_QOS, TF_STATIC_QOS
+from acslam.scenario import load_scenario
 
 HUMBLE = Ros2Options(distro="humble", attachment="legacy")
 
@@ -149,6 +154,80 @@ def test_served_run_with_the_legacy_attachment(tiny_scenario: Path, tmp_path: Pa
     examples = metrics["ros2"]["drop_examples"]
     assert "angle_increment: must be finite" in examples["/alpha/scan: invalid message"]
     assert "position.x: must be finite" in examples["/alpha/odom: invalid message"]
+
+
+def test_robots_of_unknown_starts_move_under_the_team_map_when_merged(
+    tiny_scenario: Path, tmp_path: Path
+) -> None:
+    """Served over ROS 2 without start poses (the tiny world's first two robots, 1.5 m
+    apart), robot beta is first in a frame of its own, beta/map, whose map goes out on
+    /beta/map; once the frames merge, beta's odom hangs under map, and /tf_static places
+    beta/map in map where the merge found it: at the true relative start, which the
+    server was never told. The run is interrupted once that is seen (in process the
+    frames merge at 4 s; served, with the look beside the control loop, later)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    out = tmp_path / "run"
+    common = ["--scenario", str(tiny_scenario), "--ros2", "--robots", "alpha,beta"]
+    server = start_acslam(
+        ["serve", *common, "--unknown-starts", "--listen", endpoint, "--out", str(out),
+         "--max-time", "120"],
+        tmp_path / "server.log",
+    )  # fmt: skip
+    robot_args = ["robot", *common, "--connect", endpoint]
+    robots = [
+        start_acslam(
+            [*robot_args, "--id", str(i), "--truth-out", str(tmp_path / f"truth_{i}.npz")],
+            tmp_path / f"robot_{i}.log",
+        )
+        for i in range(2)
+    ]
+    parents: list[str] = []  # of beta's odom, as the server published them, in order
+    merges: list[tuple[str, str, np.ndarray]] = []
+    beta_maps: list[str] = []
+    session = open_ros2_session(connect=[endpoint], timeout_s=60)
+    watcher = Ros2Node(session, "watcher", "/", Ros2Options())
+    try:
+
+        def odom_parent(message) -> None:
+            parents.extend(
+                t.header.frame_id for t in message.transforms if t.child_frame_id == "odom"
+            )
+
+        def merged(message) -> None:  # every merge so far, in each message
+            merges[:] = [(p, c, pose) for p, c, _, pose in convert.tf_transforms(message)]
+
+        watcher.subscribe("/beta/tf", "tf2_msgs/msg/TFMessage", odom_parent)
+        watcher.subscribe("/tf_static", "tf2_msgs/msg/TFMessage", merged, TF_STATIC_QOS)
+        watcher.subscribe(
+            "/beta/map", "nav_msgs/msg/OccupancyGrid",
+            lambda grid: beta_maps.append(grid.header.frame_id), MAP_QOS,
+        )  # fmt: skip
+        _until(lambda: merges and parents.count("map") >= 5, 110)
+        server.send_signal(signal.SIGINT)
+        assert _wait(server, 60, tmp_path / "server.log") == 128 + signal.SIGINT
+    finally:
+        watcher.close()
+        session.close()
+        server.kill()
+        for robot in robots:
+            robot.send_signal(signal.SIGTERM)
+        for i, robot in enumerate(robots):
+            assert _wait(robot, 20, tmp_path / f"robot_{i}.log") == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["reason"] == "interrupted"
+    (merge,) = metrics["unknown_starts"]["merges"]
+    assert metrics["unknown_starts"]["all_merged"] and not merge["false"]
+    assert beta_maps and set(beta_maps) == {"beta/map"}
+    switch = parents.index("map")  # once under map, never back under its own frame
+    assert switch > 0 and set(parents[:switch]) == {"beta/map"}
+    assert set(parents[switch:]) == {"map"}
+    ((parent, child, pose),) = merges
+    assert (parent, child) == ("map", "beta/map")
+    np.testing.assert_allclose(pose, merge["pose_in_frame"], atol=1e-6)
+    starts = load_scenario(tiny_scenario, robots=2).starts
+    true = between(starts[0], starts[1])
+    assert np.hypot(*(pose[:2] - true[:2])) <= FALSE_MERGE_M
+    assert abs(wrap_angle(pose[2] - true[2])) <= FALSE_MERGE_RAD
 
 
 def _send_malformed(session) -> None:

@@ -6,8 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from acslam import runner
+from acslam.pipeline.frames import FramedServer
 from acslam.pipeline.server import Server
 from acslam.ros2.serve import topic_truth
 from acslam.scenario import load_scenario
@@ -20,10 +22,18 @@ class _RealTeam:
         return [np.zeros((0, 4)), np.zeros((0, 4))]
 
 
-def test_a_team_without_ground_truth_gets_its_metrics_written(tmp_path: Path) -> None:
+@pytest.mark.parametrize("relative_starts", ["known", "unknown"])
+def test_a_team_without_ground_truth_gets_its_metrics_written(
+    relative_starts: str, tmp_path: Path
+) -> None:
     scenario = load_scenario("thesis-exp1", robots=2)
-    server = Server(scenario.config, scenario.starts, scenario.world.spec)
-    log = runner.RunLog(scenario.world.spec, server.snapshot(0.0))
+    server: Server | FramedServer
+    if relative_starts == "unknown":
+        scenario = scenario.with_unknown_starts()
+        server = FramedServer(scenario.config, 2, scenario.world.spec)
+    else:
+        server = Server(scenario.config, scenario.starts, scenario.world.spec)
+    log = runner.RunLog(scenario.world.spec, server.snapshot(0.0), true_starts=scenario.starts)
     out = runner.start_run_folder(tmp_path / "run", scenario)
     truth = topic_truth(_RealTeam())  # type: ignore[arg-type]
     metrics = runner.finish_run(out, scenario, log, truth, reason="time limit",

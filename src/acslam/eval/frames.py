@@ -102,6 +102,12 @@ def pose_error(estimated: np.ndarray, true: np.ndarray) -> tuple[float, float]:
     )
 
 
+JUDGEMENT_KEYS = (
+    "true_pose_in_frame", "error_m", "error_rad", "error_at_robots_m", "false", "false_at_robots",
+)  # fmt: skip
+"""What a merge's entry says of it against the truth."""
+
+
 def merge_metrics(
     snapshot: Snapshot, true_starts: np.ndarray, truth: list[np.ndarray], names: list[str]
 ) -> dict:
@@ -112,19 +118,20 @@ def merge_metrics(
     drifted alone before the maps met (a heading drift of 0.02 rad moves a start 10 m
     away by 0.2 m); ``error_at_robots_m`` is where the merge put the merged robots
     against where they truly stood then (``truth``: ``[t, x, y, theta]`` rows per
-    robot), which a merge of the wrong places gets wrong by metres."""
+    robot), which a merge of the wrong places gets wrong by metres.
+
+    A robot without truth rows (a real one) has no true start either: a merge of its
+    frame, or into it, is listed with its judgement None, as is ``false_merges`` when
+    any merge is not judged."""
+    has_truth = [len(trajectory) > 0 for trajectory in truth]
     merges = []
     for merge in snapshot.merges:
         into, merged = merge.into_robot_ids[0], merge.merged_robot_ids[0]
         assert merge.decision.pose is not None
-        true = between(true_starts[into], true_starts[merged])
-        error_m, error_rad = pose_error(merge.decision.pose, true)
-        placed = transform_points(merge.decision.pose, merge.merged_poses[:, :2])
-        stood = np.array(
-            [_true_xy(truth[r], merge.poses_time_s) for r in merge.merged_robot_ids]
-        ).reshape(-1, 2)
-        stood_in_frame = transform_points(between(true_starts[into], np.zeros(3)), stood)
-        at_robots_m = float(np.max(np.hypot(*(placed - stood_in_frame).T)))
+        if all(has_truth[r] for r in (into, *merge.merged_robot_ids)):
+            judgement = _judged(merge, true_starts, truth)
+        else:
+            judgement = dict.fromkeys(JUDGEMENT_KEYS)
         merges.append(
             {
                 "time_s": merge.time_s,
@@ -132,12 +139,7 @@ def merge_metrics(
                 "merged": frame_name(merged),
                 "robots": [names[r] for r in merge.merged_robot_ids],
                 "pose_in_frame": [float(v) for v in merge.decision.pose],
-                "true_pose_in_frame": [float(v) for v in true],
-                "error_m": error_m,
-                "error_rad": error_rad,
-                "error_at_robots_m": at_robots_m,
-                "false": error_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
-                "false_at_robots": at_robots_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
+                **judgement,
                 "matched_points": merge.decision.matched_points,
                 "score": merge.decision.score,
                 "second_score": merge.decision.second_score,
@@ -147,19 +149,42 @@ def merge_metrics(
     home = next(view for view in snapshot.frames if 0 in view.robot_ids)
     for robot_id, name in enumerate(names):
         robots[name] = {"merged_s": _joined_robot_0_s(snapshot.merges, robot_id)}
-        if robot_id in home.robot_ids:
+        if robot_id in home.robot_ids and has_truth[0] and has_truth[robot_id]:
             _, poses = home.snapshot.localization.trajectory(home.robot_ids.index(robot_id))
             start = poses[0]
             true = between(true_starts[0], true_starts[robot_id])
             error_m, error_rad = pose_error(start, true)
             robots[name].update(start_error_m=error_m, start_error_rad=error_rad)
+    judged = all(m["false"] is not None for m in merges)
     return {
         "merges": merges,
-        "false_merges": sum(m["false"] for m in merges),
-        "false_merges_at_robots": sum(m["false_at_robots"] for m in merges),
+        "false_merges": sum(m["false"] for m in merges) if judged else None,
+        "false_merges_at_robots": sum(m["false_at_robots"] for m in merges) if judged else None,
         "all_merged": len(snapshot.frames) == 1,
         "frames_at_end": [view.name for view in snapshot.frames],
         "robots": robots,
+    }
+
+
+def _judged(merge: FrameMerge, true_starts: np.ndarray, truth: list[np.ndarray]) -> dict:
+    """A merge against the truth: the ``JUDGEMENT_KEYS`` (see :func:`merge_metrics`)."""
+    into = merge.into_robot_ids[0]
+    assert merge.decision.pose is not None
+    true = between(true_starts[into], true_starts[merge.merged_robot_ids[0]])
+    error_m, error_rad = pose_error(merge.decision.pose, true)
+    placed = transform_points(merge.decision.pose, merge.merged_poses[:, :2])
+    stood = np.array(
+        [_true_xy(truth[r], merge.poses_time_s) for r in merge.merged_robot_ids]
+    ).reshape(-1, 2)
+    stood_in_frame = transform_points(between(true_starts[into], np.zeros(3)), stood)
+    at_robots_m = float(np.max(np.hypot(*(placed - stood_in_frame).T)))
+    return {
+        "true_pose_in_frame": [float(v) for v in true],
+        "error_m": error_m,
+        "error_rad": error_rad,
+        "error_at_robots_m": at_robots_m,
+        "false": error_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
+        "false_at_robots": at_robots_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
     }
 
 

@@ -2,7 +2,9 @@
 
 The server waits until each robot's odometry, a scan and the laser mount joining them
 have arrived (robots not ready by ``startup_timeout_s`` start lost), starts each robot's
-estimate at the scenario's start pose, then runs the same loop as every other run
+estimate at the scenario's start pose (with ``robots.relative_starts: unknown``, at the
+origin of a frame of its own, to be merged as the data allows: the start poses then only
+place the frames for scoring), then runs the same loop as every other run
 (:func:`acslam.runner.run_loop`), with the map update and the decisions beside it
 (:class:`~acslam.pipeline.jobs.BackgroundJobs`). Whatever ends the run, every robot is
 sent zero velocity. The run folder is written as an in-process run's; the ground truth comes from
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +25,7 @@ import zenoh
 from acslam import runner
 from acslam.errors import TransportError
 from acslam.geometry import compose
+from acslam.pipeline.frames import FramedServer
 from acslam.pipeline.jobs import BackgroundJobs
 from acslam.pipeline.server import Server
 from acslam.ros2.node import Ros2Node, Ros2Options, open_ros2_session
@@ -68,7 +71,6 @@ def serve_ros2(
 ) -> dict:
     """Serve ROS 2 robots until explored, all lost, or ``max_time_s``; returns the
     metrics written to ``out_dir``."""
-    scenario.require_known_starts("ROS 2 served runs")
     out_dir = runner.start_run_folder(out_dir, scenario)
     sessions, nodes = _open_nodes(options)
     try:
@@ -89,10 +91,20 @@ def serve_ros2(
             starts = scenario.starts.copy()
             for robot, mount in mounts.items():
                 starts[robot] = compose(scenario.starts[robot], mount)
-            server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
+            server: Server | FramedServer
+            true_starts = None
+            if scenario.config.robots.relative_starts == "unknown":
+                server = FramedServer(
+                    scenario.config, len(starts), scenario.world.spec, BackgroundJobs
+                )
+                true_starts = starts
+            else:
+                server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
             for robot in set(range(len(starts))) - set(mounts):
                 server.mark_lost(robot, 0.0)
-            log = runner.RunLog(scenario.world.spec, server.snapshot(0.0), hooks.on_progress)
+            log = runner.RunLog(
+                scenario.world.spec, server.snapshot(0.0), hooks.on_progress, true_starts
+            )
             try:
                 reason, wall_time_s = runner.run_loop(
                     server, source, log,
@@ -103,8 +115,10 @@ def serve_ros2(
         finally:
             source.stop()
         extra = {"ros2": {"robots": list(options.namespaces), **source.statistics()}}
+        # Scored at the lasers' starts: the poses the server estimates (and, with unknown
+        # starts, its frames' origins) are the lasers'.
         return runner.finish_run(
-            out_dir, scenario, log, truth(source),
+            out_dir, replace(scenario, starts=starts), log, truth(source),
             reason=reason, wall_time_s=wall_time_s, time_s=source.time_s, extra=extra,
         )  # fmt: skip
     finally:

@@ -8,6 +8,15 @@ mount), and publishes ``cmd_vel``, ``tf`` (``map -> odom``, REP 105: never
 ``map -> base``) and ``plan``; for the team, ``/map`` (transient local, so a late RViz
 still gets it; cropped to its known cells) and frontier, cluster and goal markers.
 
+With unknown relative starts (:mod:`acslam.pipeline.frames`) ``map`` is still the team's
+frame: robot 0's, where ``/map`` and the markers are. A robot not yet merged into it is
+in the frame of its own (or its merged frame's first robot's) start, ``<ns>/map`` after
+that robot's namespace: its ``tf`` has that parent and its plan that frame, and that
+frame's map and markers go out under the namespace (``/<ns>/map``). A merge moves the
+robot's ``odom`` under its new frame, and ``/tf_static`` (transient local) then holds
+every merge so far as ``into -> merged`` frame at the pose the merge found, so what was
+drawn in a merged frame still shows in place.
+
 The robots keep their own clocks and odometry frames. Stamps become seconds since the
 source started (:attr:`clock_origin_s`), odometry poses stay in each robot's ``odom``
 frame: the server only uses their increments, from a start pose it is given in the map
@@ -34,9 +43,9 @@ from acslam.errors import MessageError
 from acslam.geometry import between, compose
 from acslam.grid import GridSpec
 from acslam.messages import RobotMessage
-from acslam.pipeline.snapshot import Snapshot
+from acslam.pipeline.snapshot import MapView, Snapshot
 from acslam.ros2 import convert, wire
-from acslam.ros2.node import Ros2Node, TopicStats
+from acslam.ros2.node import Ros2Node, Ros2Publisher, TopicStats
 from acslam.ros2.pairing import OdometryPairing
 from acslam.ros2.tf_tree import TfTree
 from acslam.sources import LiveSource
@@ -147,7 +156,10 @@ class Ros2Source(LiveSource):
         self._robots = [_Robot(i, ns) for i, ns in enumerate(namespaces)]
         self._lost: set[int] = set()
         self._next_map_s = 0.0
-        self._map_version = -1
+        # Per ROS frame: the map last published (a version of one mapper), its publishers.
+        self._published_maps: dict[str, MapView] = {}
+        self._frame_publishers: dict[str, tuple[Ros2Publisher, Ros2Publisher]] = {}
+        self._merges_published = 0
         self._cmd_vel_type = cmd_vel_type(self.node.options.distro, self.topics.cmd_vel_stamped)
         t = self.topics
         self._publishers = []
@@ -170,8 +182,8 @@ class Ros2Source(LiveSource):
                     "plan": node.publisher(resolve(ns, t.plan), "nav_msgs/msg/Path"),
                 }
             )
-        self._map = self.node.publisher(t.map, "nav_msgs/msg/OccupancyGrid", MAP_QOS)
-        self._markers = self.node.publisher(t.markers, "visualization_msgs/msg/MarkerArray")
+        self._merges_tf = self.node.publisher("/tf_static", "tf2_msgs/msg/TFMessage", TF_STATIC_QOS)
+        self._map_publishers("map")
 
     # ------------------------------------------------------------------ callbacks
 
@@ -252,21 +264,25 @@ class Ros2Source(LiveSource):
 
     def deliver(self, snapshot: Snapshot) -> None:
         now_s = time.time()
+        frames = self._robot_frames(snapshot)
         for robot, publishers in zip(self._robots, self._publishers, strict=True):
             if robot.index in self._lost or robot.pairing is None:
                 continue
             command = snapshot.commands[robot.index] if snapshot.commands else None
             v, omega = (command.v, command.omega) if command is not None else (0.0, 0.0)
             publishers["cmd_vel"].put(self._twist(v, omega, robot, now_s))
-            transform = self._map_to_odom(robot, snapshot.poses[robot.index])
+            frame = frames[robot.index]
+            transform = self._map_to_odom(robot, snapshot.poses[robot.index], frame)
             if transform is not None:
                 publishers["tf"].put(transform)
             path = snapshot.paths_m[robot.index]
             if path is not None and path is not robot.last_plan:
-                publishers["plan"].put(convert.path_msg(path, now_s, "map", self._distro))
+                publishers["plan"].put(convert.path_msg(path, now_s, frame, self._distro))
                 robot.last_plan = path
-        if self.time_s >= self._next_map_s and snapshot.map.version != self._map_version:
-            self._publish_map(snapshot, now_s)
+        if len(snapshot.merges) > self._merges_published:
+            self._publish_merges(snapshot)
+        if self.time_s >= self._next_map_s and self._publish_maps(snapshot, now_s):
+            self._next_map_s = self.time_s + self.map_period_s
 
     # ------------------------------------------------------------------ outputs
 
@@ -364,9 +380,27 @@ class Ros2Source(LiveSource):
         return convert.twist_msg(v, omega, self._distro, stamped=stamped, stamp_s=now_s,
                                  frame_id=frame)  # fmt: skip
 
-    def _map_to_odom(self, robot: _Robot, laser_in_map: np.ndarray) -> object | None:
-        """``map -> odom`` that puts the base where SLAM estimates it: map_T_base *
-        odom_T_base^-1 at the newest odometry the server has used."""
+    def _frame_name(self, base_robot_id: int) -> str:
+        """The ROS frame whose origin is robot ``base_robot_id``'s start: ``map`` for
+        robot 0's, the team's; ``<ns>/map`` for another robot's (unknown starts)."""
+        if base_robot_id == 0:
+            return "map"
+        return f"{self._robots[base_robot_id].namespace.strip('/')}/map"
+
+    def _robot_frames(self, snapshot: Snapshot) -> list[str]:
+        """Per robot, the ROS frame its pose, plan and goal are in."""
+        frames = ["map"] * len(self._robots)
+        for view in snapshot.frames:
+            for robot_id in view.robot_ids:
+                frames[robot_id] = self._frame_name(view.robot_ids[0])
+        return frames
+
+    def _map_to_odom(
+        self, robot: _Robot, laser_in_map: np.ndarray, map_frame: str
+    ) -> object | None:
+        """``map -> odom`` (``map_frame``: the robot's frame) that puts the base where
+        SLAM estimates it: map_T_base * odom_T_base^-1 at the newest odometry the server
+        has used."""
         assert robot.pairing is not None
         latest = robot.pairing.latest
         if latest is None:
@@ -378,20 +412,67 @@ class Ros2Source(LiveSource):
         if self.global_tf and not odom.startswith(robot.namespace.strip("/") + "/"):
             odom = f"{robot.namespace.strip('/')}/{odom}"
         ros_stamp_s = stamp_s + self.clock_origin_s
-        return convert.tf_message([("map", odom, ros_stamp_s, map_to_odom)], self._distro)
+        return convert.tf_message([(map_frame, odom, ros_stamp_s, map_to_odom)], self._distro)
 
-    def _publish_map(self, snapshot: Snapshot, now_s: float) -> None:
-        spec = self.map_spec
+    def _publish_merges(self, snapshot: Snapshot) -> None:
+        """Every merge so far, as ``into -> merged`` frame on ``/tf_static`` (one message
+        with all of them: a late subscriber gets only the last)."""
+        transforms = [
+            (
+                self._frame_name(merge.into_robot_ids[0]),
+                self._frame_name(merge.merged_robot_ids[0]),
+                merge.time_s + self.clock_origin_s,
+                merge.decision.pose,
+            )
+            for merge in snapshot.merges
+        ]
+        self._merges_tf.put(convert.tf_message(transforms, self._distro))
+        self._merges_published = len(snapshot.merges)
+
+    def _publish_maps(self, snapshot: Snapshot, now_s: float) -> bool:
+        """The team's map and markers, and with unknown starts each other frame's under
+        its first robot's namespace; each only when it changed. Whether any was."""
+        if not snapshot.frames:
+            return self._publish_map("map", snapshot, self.map_spec, now_s)
+        names = [self._frame_name(view.robot_ids[0]) for view in snapshot.frames]
+        for gone in set(self._published_maps) - set(names):  # merged: its map is let go
+            del self._published_maps[gone]
+        published = [
+            self._publish_map(name, view.snapshot, view.spec, now_s)
+            for name, view in zip(names, snapshot.frames, strict=True)
+        ]
+        return any(published)
+
+    def _map_publishers(self, frame: str) -> tuple[Ros2Publisher, Ros2Publisher]:
+        """The map and markers publishers of a ROS frame: the team's topics for ``map``,
+        the same names under the namespace for ``<ns>/map``."""
+        if frame not in self._frame_publishers:
+            t = self.topics
+            map_topic, markers_topic = t.map, t.markers
+            if frame != "map":
+                namespace = frame.removesuffix("/map")
+                map_topic = resolve(namespace, t.map.lstrip("/"))
+                markers_topic = resolve(namespace, t.markers.lstrip("/"))
+            self._frame_publishers[frame] = (
+                self.node.publisher(map_topic, "nav_msgs/msg/OccupancyGrid", MAP_QOS),
+                self.node.publisher(markers_topic, "visualization_msgs/msg/MarkerArray"),
+            )
+        return self._frame_publishers[frame]
+
+    def _publish_map(self, frame: str, snapshot: Snapshot, spec: GridSpec, now_s: float) -> bool:
+        if self._published_maps.get(frame) == snapshot.map:
+            return False
+        map_publisher, markers_publisher = self._map_publishers(frame)
         values = snapshot.map.occupancy_values()
-        self._map.put(convert.known_map_msg(values, spec, now_s, "map", self._distro))
+        map_publisher.put(convert.known_map_msg(values, spec, now_s, frame, self._distro))
         frontier_xy = spec.cell_to_world(snapshot.frontier_cells)
         targets = [c.target_m for c in snapshot.clusters]
         goals = [g for g in snapshot.goals_m if g is not None]
-        self._markers.put(
-            convert.marker_array_msg(frontier_xy, targets, goals, now_s, "map", self._distro)
+        markers_publisher.put(
+            convert.marker_array_msg(frontier_xy, targets, goals, now_s, frame, self._distro)
         )
-        self._map_version = snapshot.map.version
-        self._next_map_s = self.time_s + self.map_period_s
+        self._published_maps[frame] = snapshot.map
+        return True
 
 
 class _UnknownFrameError(MessageError):
