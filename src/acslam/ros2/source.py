@@ -460,6 +460,8 @@ class Ros2Source(LiveSource):
         return self._frame_publishers[frame]
 
     def _publish_map(self, frame: str, snapshot: Snapshot, spec: GridSpec, now_s: float) -> bool:
+        """One frame's map and markers, unless this version of its mapper went out
+        already (a merge makes a new mapper, whatever its version); whether they went."""
         if self._published_maps.get(frame) == snapshot.map:
             return False
         map_publisher, markers_publisher = self._map_publishers(frame)
