@@ -92,18 +92,17 @@ def serve_ros2(
             for robot, mount in mounts.items():
                 starts[robot] = compose(scenario.starts[robot], mount)
             server: Server | FramedServer
-            true_starts = None
             if scenario.config.robots.relative_starts == "unknown":
                 server = FramedServer(
                     scenario.config, len(starts), scenario.world.spec, BackgroundJobs
                 )
-                true_starts = starts
             else:
                 server = Server(scenario.config, starts, scenario.world.spec, BackgroundJobs())
             for robot in set(range(len(starts))) - set(mounts):
                 server.mark_lost(robot, 0.0)
+            # The starts place the frames of unknown starts for scoring only.
             log = runner.RunLog(
-                scenario.world.spec, server.snapshot(0.0), hooks.on_progress, true_starts
+                scenario.world.spec, server.snapshot(0.0), hooks.on_progress, starts
             )
             try:
                 reason, wall_time_s = runner.run_loop(
