@@ -31,4 +31,8 @@ def test_a_served_team_without_start_poses_merges_and_explores(
     assert merges["false_merges"] == 0 and merges["false_merges_at_robots"] == 0
     assert metrics["safety"]["robot_collisions"] == 0
     assert "distributed" in metrics
+    # The in-process run's folder.
+    for product in ("config.yaml", "map.yaml", "map.pgm", "run.npz", "report.html"):
+        assert (out / product).is_file(), product
+    assert (out / "trajectories" / "robot_1.groundtruth.tum").is_file()
     assert (out / "merges" / "merge_1.png").is_file()
