@@ -285,7 +285,12 @@ class SlamConfig(StageParams):
     The association gates: a Euclidean pre-gate (``association_gate_m``, widened for a
     point whose own covariance, pose marginal included, reaches further, so a robot that
     drifted can still find its landmarks), then the squared Mahalanobis gate (11.34 =
-    chi-square 3 dof, 99 %), then a likelihood floor (a density, 1/m^3). A point
+    chi-square 3 dof, 99 %). ``association_min_likelihood`` is PDA's clutter term: the
+    density (1/m^3) of a point from no mapped landmark (one not mapped yet, or a false
+    detection), which competes with the candidates' Gaussian densities, so a lone
+    candidate under a wide covariance is not taken for certain (0.05: the simulated worlds'
+    0.5 landmarks per m^2 over 0.9 m of height, about a tenth of them not yet mapped where
+    a robot looks; see :func:`~acslam.slam.association.exclusive_probabilities`). A point
     with no candidate starts a new landmark only if every landmark is further than
     ``new_landmark_mahalanobis_gate`` (squared; 25 ~ 5 sigma): in between it is ambiguous
     and dropped, otherwise the 1 % of true re-observations outside the 99 % gate would
@@ -350,7 +355,7 @@ class SlamConfig(StageParams):
     mapped_space_min_path_m: PositiveFloat = 5.0
     association_gate_m: PositiveFloat = 1.0
     association_mahalanobis_gate: PositiveFloat = 11.34
-    association_min_likelihood: NonNegativeFloat = 0.01
+    association_min_likelihood: NonNegativeFloat = 0.05
     new_landmark_mahalanobis_gate: PositiveFloat = 25.0
     association_min_best_probability: Probability = 0.9
     association_min_probability: Probability = 0.05

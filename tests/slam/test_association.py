@@ -88,6 +88,27 @@ def test_exclusive_probabilities_ignore_landmarks_taken_by_other_points() -> Non
     np.testing.assert_allclose(p, [p0, 1 - p0])
 
 
+def test_a_lone_candidate_under_a_wide_covariance_competes_with_an_unmapped_landmark() -> None:
+    """PDA's clutter term: p = N / (N + lambda) for a lone candidate of density N. The same
+    squared distance (10.9, inside the 11.34 gate) is near-certain under a tight innovation
+    covariance and not under a wide one (the office_d false association: S of about
+    0.3 m x 0.3 m x 0.04 m, density 0.12 per m^3)."""
+    unmapped = 0.05
+    d2 = np.array([10.9])
+    for sigmas, expect_sure in (([0.3, 0.3, 0.04], False), ([0.05, 0.05, 0.03], True)):
+        log_norm = 0.5 * (3 * math.log(2 * math.pi) + 2 * np.log(sigmas).sum())
+        density = math.exp(-0.5 * d2[0] - log_norm)
+        cols, p = exclusive_probabilities(
+            d2, np.array([log_norm]), 11.34, np.zeros(1, bool), unmapped
+        )
+        assert list(cols) == [0]
+        np.testing.assert_allclose(p, [density / (density + unmapped)])
+        assert (p[0] >= 0.9) == expect_sure
+    # Without the term a lone candidate is certain, however unlikely the point under it.
+    _, p = exclusive_probabilities(d2, np.array([log_norm]), 11.34, np.zeros(1, bool))
+    assert p[0] == 1.0
+
+
 def test_cross_covariance_cancels_shared_drift() -> None:
     """Pose and landmark that drifted together (cross-covariance = their covariance):
     the innovation covariance is just the measurement's."""

@@ -175,18 +175,27 @@ def exclusive_probabilities(
     log_norm_row: np.ndarray,
     gate_sq: float,
     taken_by_others: np.ndarray,
+    unmapped_density: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 4.23-4.24 among one point's exclusive candidates.
+    """Eq. 4.23-4.24 among one point's exclusive candidates, beside the hypothesis that
+    the point belongs to none of them.
 
-    ``log_norm_row`` holds log sqrt((2 pi)^3 |S|) per column. Returns the candidate
-    columns (gated, not assigned to another point of the frame) and their normalised
-    probabilities (computed in log space, so tiny densities do not underflow).
+    ``log_norm_row`` holds log sqrt((2 pi)^3 |S|) per column. ``unmapped_density`` (1/m^3)
+    is the density of a point from no mapped landmark (one not mapped yet, or a false
+    detection): PDA's clutter term, which the thesis leaves out. Without it a lone
+    candidate gets probability 1 however unlikely the point is under it: on IPA
+    office_d, a landmark not yet mapped, 1.1 m from a mapped one, was taken for it once
+    a robot's pose covariance was wide enough to gate it, and the factor moved the robot's
+    estimate 0.8 m. Returns the candidate columns (gated, not assigned to another point of
+    the frame) and their probabilities (computed in log space, so tiny densities do not
+    underflow), which sum to less than 1 by what the unmapped hypothesis takes.
     """
     ok = np.isfinite(d2_row) & (d2_row <= gate_sq) & ~taken_by_others
     cols = np.flatnonzero(ok)
     if len(cols) == 0:
         return cols, np.zeros(0)
     log_like = -0.5 * d2_row[cols] - log_norm_row[cols]
-    log_like -= log_like.max()
-    p = np.exp(log_like)
-    return cols, p / p.sum()
+    top = log_like.max()
+    like = np.exp(log_like - top)
+    unmapped = unmapped_density * math.exp(-top) if unmapped_density > 0.0 else 0.0
+    return cols, like / (like.sum() + unmapped)

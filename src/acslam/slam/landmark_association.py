@@ -436,7 +436,9 @@ class LandmarkAssociation:
                 column = int(np.argmin(row))
         if column < n_conf:
             excluded[n_conf:] = True
-        cols, probs = exclusive_probabilities(d2[n], log_norm[n], gate, excluded)
+        cols, probs = exclusive_probabilities(
+            d2[n], log_norm[n], gate, excluded, cfg.association_min_likelihood
+        )
         best = float(probs[cols == column][0])
         if best < cfg.association_min_best_probability:
             self.dropped_ambiguous += 1
