@@ -195,7 +195,7 @@ def exclusive_probabilities(
     if len(cols) == 0:
         return cols, np.zeros(0)
     log_like = -0.5 * d2_row[cols] - log_norm_row[cols]
-    top = log_like.max()
+    log_unmapped = math.log(unmapped_density) if unmapped_density > 0.0 else -math.inf
+    top = max(float(log_like.max()), log_unmapped)
     like = np.exp(log_like - top)
-    unmapped = unmapped_density * math.exp(-top) if unmapped_density > 0.0 else 0.0
-    return cols, like / (like.sum() + unmapped)
+    return cols, like / (like.sum() + math.exp(log_unmapped - top))
