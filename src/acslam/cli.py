@@ -707,6 +707,15 @@ def print_run_summary(metrics: dict) -> None:
         from acslam.eval.report import team_alignment_text
 
         _console.print(team_alignment_text(metrics["team_alignment"]), markup=False, soft_wrap=True)
+    unknown = metrics.get("unknown_starts")
+    if unknown:
+        from acslam.eval.report import merge_text
+
+        for merge in unknown["merges"]:
+            _console.print(merge_text(merge), markup=False, soft_wrap=True)
+        if not unknown["all_merged"]:
+            frames = ", ".join(unknown["frames_at_end"])
+            _console.print(f"frames not merged by the end: {frames}", markup=False)
     online = metrics["online_localization"]
     if online:
         worst = max(online, key=lambda name: online[name]["max_m"])

@@ -29,6 +29,8 @@ def test_a_served_team_without_start_poses_merges_and_explores(
     merges = metrics["unknown_starts"]
     assert merges["all_merged"], merges
     assert merges["false_merges"] == 0 and merges["false_merges_at_robots"] == 0
+    assert merges["false_merges_locally"] == 0
+    assert "robot_1 merged into robot_0/map" in result.stdout
     assert metrics["safety"]["robot_collisions"] == 0
     assert "distributed" in metrics
     # The in-process run's folder.

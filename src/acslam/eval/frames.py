@@ -5,6 +5,13 @@ knows it (the simulator's truth), so it places every frame in the world to score
 and trajectories as in any run, and judges each merge: the pose found for the merged
 frame against the true one. A merge more than ``FALSE_MERGE_M`` or ``FALSE_MERGE_RAD``
 off is a false merge.
+
+That judgement also charges a merge with the drift of both frames: a frame whose heading
+drifted 0.015 rad puts a place 45 m from its origin 0.7 m off, and a merge that lays the
+other frame's map exactly onto that frame's map there is 0.7 m off too. So each merge is
+also judged locally, against where each frame's own keyframes near the merged robots
+place the truth (``local_error_m``, ``false_locally``): a merge onto the wrong place
+fails both, a merge of drifted frames fails only the first.
 """
 
 from __future__ import annotations
@@ -15,8 +22,16 @@ from pathlib import Path
 
 import numpy as np
 
+from acslam.eval.metrics import interpolate_poses
 from acslam.eval.slam_figures import plot_map_panels
-from acslam.geometry import between, transform_points, wrap_angle, wrap_angles
+from acslam.geometry import (
+    between,
+    between_rows,
+    compose_rows,
+    transform_points,
+    wrap_angle,
+    wrap_angles,
+)
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec
 from acslam.mapping.merge import overlay, place_grid
 from acslam.pipeline.frames import FrameMerge, frame_name
@@ -24,6 +39,11 @@ from acslam.pipeline.snapshot import Snapshot
 
 FALSE_MERGE_M = 0.3
 FALSE_MERGE_RAD = math.radians(5.0)
+LOCAL_RADIUS_M = 5.0
+"""Both frames' keyframes within this of the merged robots (as the merge placed them)
+tell how each frame lies on the truth there: about a LiDAR's reach, the maps the merge
+matched."""
+LOCAL_MIN_KEYFRAMES = 5
 
 
 def frame_origins(snapshot: Snapshot, true_starts: np.ndarray) -> dict[int, np.ndarray]:
@@ -104,6 +124,7 @@ def pose_error(estimated: np.ndarray, true: np.ndarray) -> tuple[float, float]:
 
 JUDGEMENT_KEYS = (
     "true_pose_in_frame", "error_m", "error_rad", "error_at_robots_m", "false", "false_at_robots",
+    "local_error_m", "local_error_rad", "false_locally",
 )  # fmt: skip
 """What a merge's entry says of it against the truth."""
 
@@ -119,6 +140,12 @@ def merge_metrics(
     away by 0.2 m); ``error_at_robots_m`` is where the merge put the merged robots
     against where they truly stood then (``truth``: ``[t, x, y, theta]`` rows per
     robot), which a merge of the wrong places gets wrong by metres.
+
+    ``local_error_m`` and ``local_error_rad`` are what the merge itself got wrong, without
+    either frame's drift: where it put the merged frame's keyframes within
+    ``LOCAL_RADIUS_M`` of the merged robots against where the joined frame's own
+    keyframes there place them (:func:`_local_error`). None where either frame has fewer
+    than ``LOCAL_MIN_KEYFRAMES`` keyframes there.
 
     A robot without truth rows (a real one) has no true start either: a merge of its
     frame, or into it, is listed with its judgement None, as is ``false_merges`` when
@@ -160,6 +187,7 @@ def merge_metrics(
         "merges": merges,
         "false_merges": sum(m["false"] for m in merges) if judged else None,
         "false_merges_at_robots": sum(m["false_at_robots"] for m in merges) if judged else None,
+        "false_merges_locally": sum(bool(m["false_locally"]) for m in merges) if judged else None,
         "all_merged": len(snapshot.frames) == 1,
         "frames_at_end": [view.name for view in snapshot.frames],
         "robots": robots,
@@ -173,11 +201,10 @@ def _judged(merge: FrameMerge, true_starts: np.ndarray, truth: list[np.ndarray])
     true = between(true_starts[into], true_starts[merge.merged_robot_ids[0]])
     error_m, error_rad = pose_error(merge.decision.pose, true)
     placed = transform_points(merge.decision.pose, merge.merged_poses[:, :2])
-    stood = np.array(
-        [_true_xy(truth[r], merge.poses_time_s) for r in merge.merged_robot_ids]
-    ).reshape(-1, 2)
+    stood = _true_poses(truth, merge.merged_robot_ids, merge.poses_time_s)[:, :2]
     stood_in_frame = transform_points(between(true_starts[into], np.zeros(3)), stood)
     at_robots_m = float(np.max(np.hypot(*(placed - stood_in_frame).T)))
+    local = _local_error(merge, true_starts, truth)
     return {
         "true_pose_in_frame": [float(v) for v in true],
         "error_m": error_m,
@@ -185,12 +212,80 @@ def _judged(merge: FrameMerge, true_starts: np.ndarray, truth: list[np.ndarray])
         "error_at_robots_m": at_robots_m,
         "false": error_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
         "false_at_robots": at_robots_m > FALSE_MERGE_M or error_rad > FALSE_MERGE_RAD,
+        "local_error_m": None if local is None else local[0],
+        "local_error_rad": None if local is None else local[1],
+        "false_locally": None
+        if local is None
+        else local[0] > FALSE_MERGE_M or local[1] > FALSE_MERGE_RAD,
     }
 
 
-def _true_xy(trajectory: np.ndarray, time_s: float) -> np.ndarray:
-    """Where the truth's ``[t, x, y, theta]`` rows put the robot at ``time_s``."""
-    return np.array([np.interp(time_s, trajectory[:, 0], trajectory[:, k]) for k in (1, 2)])
+def _local_error(
+    merge: FrameMerge, true_starts: np.ndarray, truth: list[np.ndarray]
+) -> tuple[float, float] | None:
+    """The merge's error where it was made, in m and rad (see :func:`merge_metrics`), or
+    None where either frame has too few keyframes there.
+
+    Both frames' keyframes near the merged robots are put in the joined frame, by their
+    estimates (the merged frame's through the merge) and by the truth. The joined frame's
+    keyframes give how that frame lies on the truth there; through it, the truth says
+    where the joined frame's map has the merged frame's keyframes, and the motion from
+    there to where the merge put them is the merge's own error."""
+    origin = true_starts[merge.into_robot_ids[0]]
+    placed_xy = compose_rows(merge.decision.pose, merge.merged_poses)[:, :2]
+    into_estimated, into_true = _keyframes_near(
+        merge.into_robot_ids, merge.into_trajectories, np.zeros(3), origin, truth, placed_xy
+    )
+    merged_estimated, merged_true = _keyframes_near(
+        merge.merged_robot_ids, merge.merged_trajectories, merge.decision.pose, origin, truth,
+        placed_xy,
+    )  # fmt: skip
+    if min(len(into_true), len(merged_true)) < LOCAL_MIN_KEYFRAMES:
+        return None
+    drift = _motion_between(into_true, into_estimated)
+    expected = compose_rows(np.broadcast_to(drift, merged_true.shape), merged_true)
+    error = _motion_between(expected, merged_estimated)
+    gaps_m = np.linalg.norm(transform_points(error, placed_xy) - placed_xy, axis=1)
+    return float(np.max(gaps_m)), abs(float(error[2]))
+
+
+def _keyframes_near(
+    robot_ids: tuple[int, ...],
+    trajectories: tuple[tuple[np.ndarray, np.ndarray], ...],
+    frame_pose: np.ndarray,
+    origin: np.ndarray,
+    truth: list[np.ndarray],
+    centres_xy: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The keyframes of a frame (at ``frame_pose`` in the joined frame) whose estimates
+    lie within ``LOCAL_RADIUS_M`` of ``centres_xy`` there: (N, 3) estimated and true
+    poses in the joined frame (whose first robot truly started at ``origin``)."""
+    estimated, true = [], []
+    for robot_id, (stamps, poses) in zip(robot_ids, trajectories, strict=True):
+        rows = truth[robot_id]
+        world = interpolate_poses(np.asarray(stamps, float), rows[:, 0], rows[:, 1:4])
+        placed = compose_rows(np.broadcast_to(frame_pose, poses.shape), poses)
+        distance_m = np.linalg.norm(placed[:, None, :2] - centres_xy[None], axis=2).min(axis=1)
+        near = (distance_m <= LOCAL_RADIUS_M) & ~np.isnan(world).any(axis=1)
+        estimated.append(placed[near])
+        true.append(between_rows(np.broadcast_to(origin, world[near].shape), world[near]))
+    return np.vstack(estimated), np.vstack(true)
+
+
+def _motion_between(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The rigid motion that lays (N, 3) poses ``source`` onto ``target``: its turn their
+    mean heading gap (positions alone leave it open where a robot turned on the spot),
+    then the mean shift."""
+    gaps_rad = target[:, 2] - source[:, 2]
+    turn_rad = math.atan2(float(np.mean(np.sin(gaps_rad))), float(np.mean(np.cos(gaps_rad))))
+    turned = transform_points(np.array([0.0, 0.0, turn_rad]), source[:, :2])
+    return np.array([*np.mean(target[:, :2] - turned, axis=0), turn_rad])
+
+
+def _true_poses(truth: list[np.ndarray], robot_ids: tuple[int, ...], time_s: float) -> np.ndarray:
+    """(N, 3) where the truth's ``[t, x, y, theta]`` rows put each robot at ``time_s``."""
+    when = np.array([time_s])
+    return np.vstack([interpolate_poses(when, truth[r][:, 0], truth[r][:, 1:4]) for r in robot_ids])
 
 
 def _joined_robot_0_s(merges: tuple[FrameMerge, ...], robot_id: int) -> float | None:

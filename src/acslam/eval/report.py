@@ -462,6 +462,19 @@ def write_figures(out_dir: Path, record: RunRecord) -> list[ReportFigure]:
     return figures
 
 
+def merge_figures(out_dir: Path, metrics: dict) -> list[ReportFigure]:
+    """The figure of each merge (``merges/merge_<k>.png``, written with the run)."""
+    unknown = metrics.get("unknown_starts") or {"merges": []}
+    return [
+        ReportFigure(
+            Path(out_dir) / "merges" / f"merge_{k}.png",
+            f"Merge {k}, at {merge['time_s']:.0f} s: both frames' maps before it and the "
+            "merged map after.",
+        )
+        for k, merge in enumerate(unknown["merges"], start=1)
+    ]
+
+
 # --------------------------------------------------------------------------- html
 
 DASH = "—"
@@ -560,6 +573,49 @@ def team_alignment_text(alignment: dict) -> str:
         f"{alignment['aligned_rmse_m']:.3f} m: "
         "the rest of the RMSE above is the whole map turned or shifted against the start "
         "frame, not error inside it."
+    )
+
+
+def merge_text(merge: dict) -> str:
+    """One sentence on a merge of metrics.json's ``unknown_starts``: when, which frames,
+    and how far off it was at the joined frame's origin, at the robots and where it was
+    made (see :func:`acslam.eval.frames.merge_metrics`)."""
+    text = f"{merge['time_s']:.0f} s: {', '.join(merge['robots'])} merged into {merge['into']}"
+    if merge["error_m"] is None:
+        return text + " (no ground truth to judge it)"
+    text += (
+        f", {merge['error_m']:.3f} m and {1000 * merge['error_rad']:.1f} mrad off at the "
+        f"frame's origin{' (a false merge)' if merge['false'] else ''}, "
+        f"{merge['error_at_robots_m']:.3f} m at the robots"
+    )
+    if merge.get("local_error_m") is None:  # too few keyframes near, or an older run
+        return text + "; not judged where it was made"
+    return text + (
+        f"; {merge['local_error_m']:.3f} m and {1000 * merge['local_error_rad']:.1f} mrad "
+        f"where it was made{' (false there too)' if merge['false_locally'] else ''}"
+    )
+
+
+def _merges_table(unknown: dict) -> str:
+    """Every merge of frames, judged three ways (:func:`merge_text`)."""
+    rows = [
+        [m["time_s"], ", ".join(m["robots"]), m["into"], m["error_m"], m["error_rad"],
+         m["error_at_robots_m"], m.get("local_error_m"), m.get("local_error_rad")]
+        for m in unknown["merges"]
+    ]  # fmt: skip
+    table = _table(
+        ["time [s]", "robots", "into", "at the origin [m]", "[rad]", "at the robots [m]",
+         "where made [m]", "[rad]"],
+        rows,
+        [0, 0, 0, 3, 4, 3, 3, 4],
+    )  # fmt: skip
+    left = "" if unknown["all_merged"] else f" Frames left unmerged: {unknown['frames_at_end']}."
+    return table + _note(
+        "Each merge's error against the truth: at the joined frame's origin (a merge more "
+        "than 0.3 m or 5 deg off there is a false merge), at the merged robots, and where it "
+        "was made, against where the joined frame's own keyframes within 5 m place the "
+        "truth. The first two also hold the joined frame's drift since its start; the last "
+        f"is the merge's own error.{left}"
     )
 
 
@@ -739,6 +795,11 @@ def report_tables(metrics: dict, record: RunRecord) -> dict[str, str]:
         "Safety": _safety_table(metrics),
         "Server cycle time": _cycle_table(metrics["server_cycle_ms"]),
         **({"Server cycle over the patrol": _patrol_table(patrol)} if patrol else {}),
+        **(
+            {"Merges of frames (unknown starts)": _merges_table(metrics["unknown_starts"])}
+            if metrics.get("unknown_starts")
+            else {}
+        ),
     }
 
 
@@ -774,7 +835,7 @@ figcaption { font-size: 0.9em; margin: 0.3em 0 0.8em 0; max-width: 900px; }
 def write_report(out_dir: Path, record: RunRecord, metrics: dict) -> Path:
     """Write figures/ and report.html (figures embedded, so the file stands alone)."""
     out_dir = Path(out_dir)
-    figures = write_figures(out_dir, record)
+    figures = write_figures(out_dir, record) + merge_figures(out_dir, metrics)
     status = "completed" if metrics["completed"] else f"not completed ({metrics['reason']})"
     summary = (
         f"{metrics['scenario']}: {plural(metrics['robots'], 'robot')}, planner "
@@ -861,6 +922,25 @@ class _Cycle(_CycleStatistics):
     __pydantic_extra__: dict[str, _CycleStatistics]
 
 
+class _Merge(_Section):
+    time_s: float
+    into: str
+    robots: list[str]
+    error_m: Number
+    error_rad: Number
+    error_at_robots_m: Number
+    false: bool | None
+    local_error_m: Number = None  # absent from runs written before it
+    local_error_rad: Number = None
+    false_locally: bool | None = None
+
+
+class _UnknownStarts(_Section):
+    merges: list[_Merge]
+    all_merged: bool
+    frames_at_end: list[str]
+
+
 class ReportedMetrics(_Section):
     """What the report reads of ``metrics.json``."""
 
@@ -881,6 +961,7 @@ class ReportedMetrics(_Section):
     mapping: _Mapping
     safety: dict[str, float | None]  # infinite in runs written before JSON was strict
     server_cycle_ms: _Cycle
+    unknown_starts: _UnknownStarts | None = None  # runs with known starts have none
 
 
 def read_run(out_dir: Path) -> tuple[dict, RunRecord]:

@@ -129,7 +129,10 @@ class FrameMerge:
     stands at its origin), when those robots stood at ``merged_poses`` in their frame (at
     ``poses_time_s``: the evidence's time, earlier than ``time_s`` where the look ran
     beside the control loop). The maps before (cropped to what each knew) and the merged
-    map after are kept for the report."""
+    map after are kept for the report. ``into_trajectories`` and ``merged_trajectories``
+    (per robot of either frame: keyframe stamps and poses in its frame) are the frames'
+    estimates when the merge was taken in: where a scorer finds how each frame had
+    drifted at the place of the merge."""
 
     time_s: float
     into_robot_ids: tuple[int, ...]
@@ -139,6 +142,8 @@ class FrameMerge:
     poses_time_s: float
     before: tuple[tuple[np.ndarray, GridSpec], tuple[np.ndarray, GridSpec]]
     after: tuple[np.ndarray, GridSpec]
+    into_trajectories: tuple[tuple[np.ndarray, np.ndarray], ...]
+    merged_trajectories: tuple[tuple[np.ndarray, np.ndarray], ...]
 
 
 @dataclass
@@ -373,6 +378,10 @@ class FramedServer:
         for robot_id, lost_s in self._lost.items():
             if robot_id in merged.robot_ids:
                 merged.server.mark_lost(merged.robot_ids.index(robot_id), lost_s)
+        into_trajectories, merged_trajectories = (
+            tuple(self._snapshots[k].localization.trajectory(i) for i in range(len(f.robot_ids)))
+            for k, f in ((found.a, first), (found.b, second))
+        )
         first.server.close()
         second.server.close()
         self._frames[found.a] = merged
@@ -388,7 +397,7 @@ class FramedServer:
         self._merges.append(
             FrameMerge(
                 now_s, first.robot_ids, second.robot_ids, found.decision, found.merged_poses,
-                found.poses_time_s, found.before, after,
+                found.poses_time_s, found.before, after, into_trajectories, merged_trajectories,
             )
         )  # fmt: skip
 
