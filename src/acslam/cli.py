@@ -728,6 +728,11 @@ def print_run_summary(metrics: dict) -> None:
         )
     mapping, safety, coverage = metrics["mapping"], metrics["safety"], metrics["coverage"]
     travelled_m = metrics["waste"]["travelled_m"]
+    aligned = (
+        ""
+        if mapping.get("aligned_accuracy") is None
+        else f" ({_percent(mapping['aligned_accuracy'])} aligned)"
+    )
     _console.print(
         f"explored {_percent(coverage['explored_fraction_of_reachable'], 2)} of the "
         f"{coverage['reachable_area_m2']:.1f} m² of reachable free area (the team map holds "
@@ -735,7 +740,7 @@ def print_run_summary(metrics: dict) -> None:
         f"{_percent(metrics['waste']['overlap_ratio'])} of the robots' mapped area was seen "
         f"by more than one); the robots drove {metrics['waste']['travelled_total_m']:.1f} m "
         f"({', '.join(f'{name} {m:.1f}' for name, m in travelled_m.items())}); map accuracy "
-        f"{_percent(mapping['accuracy'])}, TPR {_percent(mapping['tpr'])}; collisions: "
+        f"{_percent(mapping['accuracy'])}{aligned}, TPR {_percent(mapping['tpr'])}; collisions: "
         f"{safety['obstacle_collisions']} with walls, {safety['robot_collisions']} between "
         f"robots; {plural(safety['stuck_events'], 'stuck event')}; server cycle "
         f"{metrics['server_cycle_ms']['mean']:.1f} ms mean, "

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.optimize import minimize
 
+from acslam.eval.frames import world_values
 from acslam.eval.metrics import (
     confusion_rates,
     coverage_by_combination,
@@ -18,6 +20,7 @@ from acslam.eval.metrics import (
     timing,
     waste,
 )
+from acslam.grid import OCCUPIED, UNKNOWN, GridSpec
 
 
 def test_shifted_trajectory_has_the_shift_as_error() -> None:
@@ -228,3 +231,33 @@ def test_explored_areas_of_a_tiny_grid() -> None:
     assert math.isnan(
         explored_areas(known, np.zeros_like(known), 0.25)["explored_fraction_of_reachable"]
     )
+
+
+def _wall_map(wall_row: int) -> tuple[GridSpec, np.ndarray, np.ndarray]:
+    """A 10 m x 10 m grid at 5 cm with one straight wall along row 100 (y = 5 m), and a
+    map that knows rows 80-120 with its wall on ``wall_row`` instead."""
+    spec = GridSpec(0.0, 0.0, 0.05, 200, 200)
+    true_occupied = np.zeros(spec.shape, dtype=bool)
+    true_occupied[100, 20:181] = True
+    values = np.full(spec.shape, UNKNOWN, dtype=np.int8)
+    values[80:121, 10:191] = 0
+    values[wall_row, 20:181] = OCCUPIED
+    return spec, true_occupied, values
+
+
+@pytest.mark.parametrize("framed", [False, True])
+def test_a_map_moved_by_the_teams_alignment_scores_what_it_is_inside(framed: bool) -> None:
+    """A map right inside but 0.5 m off as a whole: 161 wall cells missed and 161 walls
+    where there are none, of the 41 x 181 mapped; moved back by the alignment, every cell
+    is right. With unknown starts the motion joins each frame's placement."""
+    spec, true_occupied, values = _wall_map(wall_row=110)
+    view = SimpleNamespace(
+        robot_ids=(0,), spec=spec, snapshot=SimpleNamespace(map=SimpleNamespace(
+            occupancy_values=lambda: values))
+    )  # fmt: skip
+    snapshot = SimpleNamespace(frames=(view,) if framed else (), map=view.snapshot.map)
+    starts = np.zeros((1, 3))
+    as_is = confusion_rates(true_occupied, world_values(snapshot, starts, spec))
+    assert as_is["accuracy"] == pytest.approx((41 * 181 - 2 * 161) / (41 * 181))
+    moved = world_values(snapshot, starts, spec, np.array([0.0, -0.5, 0.0]))
+    assert confusion_rates(true_occupied, moved)["accuracy"] == 1.0

@@ -27,6 +27,7 @@ from acslam.eval.slam_figures import plot_map_panels
 from acslam.geometry import (
     between,
     between_rows,
+    compose,
     compose_rows,
     transform_points,
     wrap_angle,
@@ -62,13 +63,23 @@ def placed_poses(origin: np.ndarray, poses: np.ndarray) -> np.ndarray:
     return np.column_stack([xy, wrap_angles(poses[:, 2] + origin[2])])
 
 
-def world_values(snapshot: Snapshot, true_starts: np.ndarray, spec: GridSpec) -> np.ndarray:
-    """The team's map on the world's grid: every frame's map placed and overlaid."""
+def world_values(
+    snapshot: Snapshot,
+    true_starts: np.ndarray,
+    spec: GridSpec,
+    motion: np.ndarray | None = None,
+) -> np.ndarray:
+    """The team's map on the world's grid: every frame's map placed and overlaid; moved
+    on its way by the rigid ``motion`` ``[x, y, theta]`` if given (the team's alignment
+    onto the truth)."""
     if not snapshot.frames:
-        return snapshot.map.occupancy_values()
+        values = snapshot.map.occupancy_values()
+        return values if motion is None else _placed_for_scoring(values, spec, motion, spec)
     values = np.full(spec.shape, UNKNOWN, dtype=np.int8)
     for view in snapshot.frames:
         origin = true_starts[view.robot_ids[0]]
+        if motion is not None:
+            origin = compose(motion, origin)
         frame_values = view.snapshot.map.occupancy_values()
         values = overlay(values, _placed_for_scoring(frame_values, view.spec, origin, spec))
     return values

@@ -684,18 +684,24 @@ MAPPING_NAMES = {
 
 def _mapping_table(metrics: dict) -> str:
     mapping = metrics["mapping"]
-    table = _table(
-        ["measure", "value [%]"],
-        [
-            [label, None if mapping[k] is None else 100 * mapping[k]]
-            for k, label in MAPPING_NAMES.items()
-        ],
-        [0, 1],
-    )
+    rows = [
+        [label, None if mapping[k] is None else 100 * mapping[k]]
+        for k, label in MAPPING_NAMES.items()
+    ]
+    aligned = mapping.get("aligned_accuracy")  # absent from older runs, None without truth
+    if aligned is not None:
+        rows.append(["accuracy, the map moved by the team's alignment", 100 * aligned])
+    table = _table(["measure", "value [%]"], rows, [0, 1])
     scored = sum(mapping[k] for k in ("tp", "tn", "fp", "fn"))
     note = f"Over the {plural(scored, 'mapped cell')}; occupied is positive."
     if any(mapping[k] is None or not math.isfinite(mapping[k]) for k in MAPPING_NAMES):
         note += f" {DASH}: no cell of that rate's kind was mapped."
+    if aligned is not None:
+        note += (
+            " The last row scores the map after the one rigid motion that lays the team's "
+            "trajectories onto the truth (see Localization): a map turned as a whole by an "
+            "early heading error scores low above however right it is inside."
+        )
     return table + _note(note)
 
 
@@ -904,6 +910,7 @@ class _Coverage(_Section):
 
 class _Mapping(_Section):
     accuracy: Fraction
+    aligned_accuracy: Fraction = None  # absent from runs written before it
     tpr: Fraction
     tnr: Fraction
     fpr: Fraction
