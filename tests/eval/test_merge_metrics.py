@@ -140,13 +140,13 @@ def test_the_joined_frames_turn_is_found_from_keyframes_at_one_spot() -> None:
 
 
 def test_a_merge_far_from_the_joined_frames_keyframes_is_not_judged_locally() -> None:
-    """Robot 0 keyframed only at its start, 4 m from robot 1: nothing tells how its frame
-    lies on the truth there."""
+    """Robot 0 keyframed only at its start, 10 m from robot 1: nothing tells how its
+    frame lies on the truth there."""
     stamps = np.linspace(0.0, 10.0, 6)
     team = _team(
-        np.array([4.1, 0.0, math.pi / 2]), np.array([4.0, 0.0, 0.0]), (stamps, np.zeros((6, 3)))
+        np.array([4.1, 0.0, math.pi / 2]), np.array([9.0, 0.0, 0.0]), (stamps, np.zeros((6, 3)))
     )
-    truth = [_still(1.0, 2.0, 0.0), _still(5.0, 6.0, math.pi / 2)]
+    truth = [_still(1.0, 2.0, 0.0), _still(5.0, 11.0, math.pi / 2)]
     (merge,) = merge_metrics(team, TRUE_STARTS, truth, ["robot_0", "robot_1"])["merges"]
     assert merge["error_m"] == pytest.approx(0.1)
     assert merge["local_error_m"] is None and merge["false_locally"] is None

@@ -613,9 +613,9 @@ def _merges_table(unknown: dict) -> str:
     return table + _note(
         "Each merge's error against the truth: at the joined frame's origin (a merge more "
         "than 0.3 m or 5 deg off there is a false merge), at the merged robots, and where it "
-        "was made, against where the joined frame's own keyframes within 5 m place the "
-        "truth. The first two also hold the joined frame's drift since its start; the last "
-        f"is the merge's own error.{left}"
+        "was made, against where both frames' own keyframes within a LiDAR's reach of the "
+        "merged robots place the truth. The first two also hold the frames' drift since "
+        f"their starts; the last is the merge's own error.{left}"
     )
 
 
