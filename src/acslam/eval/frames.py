@@ -28,7 +28,6 @@ from acslam.geometry import (
     between,
     between_rows,
     compose,
-    compose_rows,
     transform_points,
     wrap_angle,
     wrap_angles,
@@ -244,7 +243,7 @@ def _local_error(
     where the joined frame's map has the merged frame's keyframes, and the motion from
     there to where the merge put them is the merge's own error."""
     origin = true_starts[merge.into_robot_ids[0]]
-    placed_xy = compose_rows(merge.decision.pose, merge.merged_poses)[:, :2]
+    placed_xy = placed_poses(merge.decision.pose, merge.merged_poses)[:, :2]
     into_estimated, into_true = _keyframes_near(
         merge.into_robot_ids, merge.into_trajectories, np.zeros(3), origin, truth, placed_xy
     )
@@ -255,7 +254,7 @@ def _local_error(
     if min(len(into_true), len(merged_true)) < LOCAL_MIN_KEYFRAMES:
         return None
     drift = _motion_between(into_true, into_estimated)
-    expected = compose_rows(np.broadcast_to(drift, merged_true.shape), merged_true)
+    expected = placed_poses(drift, merged_true)
     error = _motion_between(expected, merged_estimated)
     gaps_m = np.linalg.norm(transform_points(error, placed_xy) - placed_xy, axis=1)
     return float(np.max(gaps_m)), abs(float(error[2]))
@@ -276,7 +275,7 @@ def _keyframes_near(
     for robot_id, (stamps, poses) in zip(robot_ids, trajectories, strict=True):
         rows = truth[robot_id]
         world = interpolate_poses(np.asarray(stamps, float), rows[:, 0], rows[:, 1:4])
-        placed = compose_rows(np.broadcast_to(frame_pose, poses.shape), poses)
+        placed = placed_poses(frame_pose, poses)
         distance_m = np.linalg.norm(placed[:, None, :2] - centres_xy[None], axis=2).min(axis=1)
         near = (distance_m <= LOCAL_RADIUS_M) & ~np.isnan(world).any(axis=1)
         estimated.append(placed[near])
