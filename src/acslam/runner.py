@@ -265,7 +265,12 @@ def finish_run(
     without cells) is None, JSON's ``null``."""
     if log.last.frames:
         names = [robot_name(i) for i in range(scenario.robot_count)]
-        unknown_starts = merge_metrics(log.last, scenario.starts, truth.trajectories, names)
+        config = scenario.config
+        # A teammate is a robot to a sighting only within this (frames.sighting).
+        reach_m = config.sensors.lidar.range_max_m - config.robots.radius_m
+        unknown_starts = merge_metrics(
+            log.last, scenario.starts, truth.trajectories, names, scenario.world, reach_m
+        )
         extra = {**(extra or {}), "unknown_starts": unknown_starts}
         write_merge_figures(out_dir, log.last.merges)
     record = _record(scenario, log, truth)

@@ -10,8 +10,10 @@ import pytest
 
 from acslam.eval.frames import JUDGEMENT_KEYS, merge_metrics
 from acslam.geometry import between, compose, compose_rows
+from acslam.grid import GridSpec
 from acslam.mapping.merge import MergeDecision
 from acslam.pipeline.frames import FrameMerge
+from acslam.worlds.world import World
 
 TRUE_STARTS = np.array([[1.0, 2.0, 0.0], [5.0, 2.0, math.pi / 2]])
 """Robot 1's frame lies 4 m along robot 0's x axis, turned a quarter."""
@@ -162,3 +164,38 @@ def test_a_team_without_ground_truth_gets_its_merges_listed_but_not_judged() -> 
     assert metrics["false_merges"] is None and metrics["false_merges_at_robots"] is None
     assert metrics["false_merges_locally"] is None
     assert metrics["robots"]["robot_1"] == {"merged_s": 10.0} and metrics["all_merged"]
+
+
+def _wall_world() -> World:
+    """10 m x 4 m, 0.05 m cells, and a wall at x = 5.00-5.05 m from y = 0 up to 2 m."""
+    spec = GridSpec(0.0, 0.0, 0.05, 80, 200)
+    occupied = np.zeros(spec.shape, dtype=bool)
+    occupied[:40, 100] = True
+    return World("wall", spec, occupied)
+
+
+def test_a_merge_says_when_its_robots_first_stood_in_sight_of_each_other() -> None:
+    """Robot 0 stands at (4, 1), left of the wall; robot 1 walks up x = 6 m from y = 0.5 m
+    at 0.1 m/s. The line between them passes the wall's face x = 5 m at the mean of their
+    heights, (1 + y) / 2, so it clears the wall's top (2 m) once y >= 3 m: at 25 s. The
+    truth is sampled at 0.5 s past each second, so the first stamp in sight is 25.5 s."""
+    stamps = np.arange(60) + 0.5
+    robot_0 = np.column_stack([stamps, np.full(60, 4.0), np.full(60, 1.0), np.zeros(60)])
+    robot_1 = np.column_stack([stamps, np.full(60, 6.0), 0.5 + 0.1 * stamps, np.zeros(60)])
+    truth = [robot_0, robot_1]
+    names = ["robot_0", "robot_1"]
+
+    def met_s(time_s: float, reach_m: float) -> float | None:
+        team = _team(
+            np.array([4.1, 0.0, math.pi / 2]), np.array([1.0, 0.0, 0.0]),
+            (np.linspace(0.0, time_s, 6), np.zeros((6, 3))), time_s=time_s,
+        )  # fmt: skip
+        (merge,) = merge_metrics(team, TRUE_STARTS, truth, names, _wall_world(), reach_m)["merges"]
+        return merge["met_s"]
+
+    assert met_s(50.0, 7.8) == pytest.approx(25.5)
+    # At 25.5 s they stand hypot(2, 2.05) = 2.86 m apart, and only further after.
+    assert met_s(50.0, 2.8) is None
+    assert met_s(25.0, 7.8) is None  # merged before they met: seen some other way
+    # Without a world nothing says when they met.
+    assert merge_metrics(_merged_team(), TRUE_STARTS, truth, names)["merges"][0]["met_s"] is None

@@ -93,6 +93,8 @@ def test_robots_in_two_like_rooms_merge_at_the_true_pose_not_the_turned_one(
     assert merge["false_locally"] is False and merge["local_error_m"] <= 0.1
     assert metrics["unknown_starts"]["all_merged"] and metrics["completed"]
     assert merge["time_s"] < metrics["timing"]["total_s"]
+    # The robots see each other through the door, so they met before the merge.
+    assert merge["met_s"] is not None and merge["met_s"] <= merge["time_s"]
     assert metrics["safety"]["robot_collisions"] == metrics["safety"]["obstacle_collisions"] == 0
     assert metrics["coverage"]["explored_fraction_of_reachable"] >= 0.99
     assert metrics["mapping"]["accuracy"] >= 0.95
@@ -106,6 +108,7 @@ def test_each_merge_has_its_figure_and_the_frames_are_placed_for_scoring(
     assert (folder / "merges" / "merge_1.png").is_file()
     report = (folder / "report.html").read_text()
     assert "Merges of frames" in report and "Merge 1, at" in report
+    assert "robots first met [s]" in report
     robots = metrics["unknown_starts"]["robots"]
     assert robots["robot_0"]["start_error_m"] <= 0.01  # robot 0's frame is the team's
     assert robots["robot_1"]["merged_s"] == metrics["unknown_starts"]["merges"][0]["time_s"]

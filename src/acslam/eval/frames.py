@@ -12,6 +12,11 @@ other frame's map exactly onto that frame's map there is 0.7 m off too. So each 
 also judged locally, against where each frame's own keyframes near the merged robots
 place the truth (``local_error_m``, ``false_locally``): a merge onto the wrong place
 fails both, a merge of drifted frames fails only the first.
+
+A merge needs the robots to see each other (:func:`acslam.pipeline.frames.sighting`), so
+each merge also says when the two frames' robots first stood within a LiDAR's reach of
+each other with nothing between them (``met_s``): a merge long after that was missed
+where it could have been made; one soon after it was as early as the robots' meeting.
 """
 
 from __future__ import annotations
@@ -36,6 +41,8 @@ from acslam.grid import OCCUPIED, UNKNOWN, GridSpec
 from acslam.mapping.merge import overlay, place_grid
 from acslam.pipeline.frames import FrameMerge, frame_name
 from acslam.pipeline.snapshot import Snapshot
+from acslam.worlds.starts import line_of_sight
+from acslam.worlds.world import World
 
 FALSE_MERGE_M = 0.3
 FALSE_MERGE_RAD = math.radians(5.0)
@@ -140,7 +147,12 @@ JUDGEMENT_KEYS = (
 
 
 def merge_metrics(
-    snapshot: Snapshot, true_starts: np.ndarray, truth: list[np.ndarray], names: list[str]
+    snapshot: Snapshot,
+    true_starts: np.ndarray,
+    truth: list[np.ndarray],
+    names: list[str],
+    world: World | None = None,
+    sighting_reach_m: float = 0.0,
 ) -> dict:
     """Every merge judged against the truth, and per robot when its frame joined robot 0's
     and how far its estimated start in that frame is from the truth.
@@ -158,6 +170,11 @@ def merge_metrics(
     than ``LOCAL_MIN_KEYFRAMES`` keyframes there; ``false_merges_locally`` counts only the
     merges judged so.
 
+    ``met_s``: when a robot of one of the merge's frames and one of the other first stood
+    within ``sighting_reach_m`` of each other with nothing of ``world`` between them (by
+    the truth): the first chance of a sighting. None without the world, or if they never
+    did before the merge.
+
     A robot without truth rows (a real one) has no true start either: a merge of its
     frame, or into it, is listed with its judgement None, as is ``false_merges`` when
     any merge is not judged."""
@@ -166,8 +183,14 @@ def merge_metrics(
     for merge in snapshot.merges:
         into, merged = merge.into_robot_ids[0], merge.merged_robot_ids[0]
         assert merge.decision.pose is not None
+        met_s = None
         if all(has_truth[r] for r in (into, *merge.merged_robot_ids)):
             judgement = _judged(merge, true_starts, truth)
+            if world is not None:
+                met_s = _first_met_s(
+                    world, sighting_reach_m, truth, merge.into_robot_ids,
+                    merge.merged_robot_ids, merge.time_s,
+                )  # fmt: skip
         else:
             judgement = dict.fromkeys(JUDGEMENT_KEYS)
         merges.append(
@@ -178,6 +201,7 @@ def merge_metrics(
                 "robots": [names[r] for r in merge.merged_robot_ids],
                 "pose_in_frame": [float(v) for v in merge.decision.pose],
                 **judgement,
+                "met_s": met_s,
                 "matched_points": merge.decision.matched_points,
                 "score": merge.decision.score,
                 "second_score": merge.decision.second_score,
@@ -297,6 +321,32 @@ def _true_poses(truth: list[np.ndarray], robot_ids: tuple[int, ...], time_s: flo
     """(N, 3) where the truth's ``[t, x, y, theta]`` rows put each robot at ``time_s``."""
     when = np.array([time_s])
     return np.vstack([interpolate_poses(when, truth[r][:, 0], truth[r][:, 1:4]) for r in robot_ids])
+
+
+def _first_met_s(
+    world: World,
+    reach_m: float,
+    truth: list[np.ndarray],
+    group_a: tuple[int, ...],
+    group_b: tuple[int, ...],
+    until_s: float,
+) -> float | None:
+    """The first truth stamp up to ``until_s`` at which a robot of ``group_a`` and one of
+    ``group_b`` stood within ``reach_m`` of each other in line of sight (see
+    :func:`merge_metrics`); None if none did."""
+    first = None
+    for a in group_a:
+        rows = truth[a][truth[a][:, 0] <= until_s]
+        for b in group_b:
+            others = interpolate_poses(rows[:, 0], truth[b][:, 0], truth[b][:, 1:4])
+            near = np.hypot(*(others[:, :2] - rows[:, 1:3]).T) < reach_m
+            for k in np.flatnonzero(near):
+                if first is not None and rows[k, 0] >= first:
+                    break
+                if line_of_sight(world, rows[k, 1:3], others[k, :2]):
+                    first = float(rows[k, 0])
+                    break
+    return first
 
 
 def _joined_robot_0_s(merges: tuple[FrameMerge, ...], robot_id: int) -> float | None:

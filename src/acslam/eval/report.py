@@ -581,6 +581,8 @@ def merge_text(merge: dict) -> str:
     and how far off it was at the joined frame's origin, at the robots and where it was
     made (see :func:`acslam.eval.frames.merge_metrics`)."""
     text = f"{merge['time_s']:.0f} s: {', '.join(merge['robots'])} merged into {merge['into']}"
+    if merge.get("met_s") is not None:  # an older run, or no world, has none
+        text += f" ({merge['time_s'] - merge['met_s']:.0f} s after the frames' robots first met)"
     if merge["error_m"] is None:
         return text + " (no ground truth to judge it)"
     text += (
@@ -599,18 +601,20 @@ def merge_text(merge: dict) -> str:
 def _merges_table(unknown: dict) -> str:
     """Every merge of frames, judged three ways (:func:`merge_text`)."""
     rows = [
-        [m["time_s"], ", ".join(m["robots"]), m["into"], m["error_m"], m["error_rad"],
-         m["error_at_robots_m"], m.get("local_error_m"), m.get("local_error_rad")]
+        [m["time_s"], m.get("met_s"), ", ".join(m["robots"]), m["into"], m["error_m"],
+         m["error_rad"], m["error_at_robots_m"], m.get("local_error_m"), m.get("local_error_rad")]
         for m in unknown["merges"]
     ]  # fmt: skip
     table = _table(
-        ["time [s]", "robots", "into", "at the origin [m]", "[rad]", "at the robots [m]",
-         "where made [m]", "[rad]"],
+        ["time [s]", "robots first met [s]", "robots", "into", "at the origin [m]", "[rad]",
+         "at the robots [m]", "where made [m]", "[rad]"],
         rows,
-        [0, 0, 0, 3, 4, 3, 3, 4],
+        [0, 0, 0, 0, 3, 4, 3, 3, 4],
     )  # fmt: skip
     left = "" if unknown["all_merged"] else f" Frames left unmerged: {unknown['frames_at_end']}."
     return table + _note(
+        "A merge needs the robots to see each other: 'robots first met' is when a robot of "
+        "each frame first stood within a LiDAR's reach of the other with nothing between. "
         "Each merge's error against the truth: at the joined frame's origin (a merge more "
         "than 0.3 m or 5 deg off there is a false merge), at the merged robots, and where it "
         "was made, against where both frames' own keyframes within a LiDAR's reach of the "
@@ -940,6 +944,7 @@ class _Merge(_Section):
     local_error_m: Number = None  # absent from runs written before it
     local_error_rad: Number = None
     false_locally: bool | None = None
+    met_s: Number = None
 
 
 class _UnknownStarts(_Section):
