@@ -68,9 +68,10 @@ UNEXPLAINED_M = 0.1
 """A scan return this far from the map's obstacles is one the map does not explain."""
 MOVING_OBJECT_RETURNS = 2
 """Returns in the map's free space that show something moved in. A robot 0.21 m across
-gives 2 or more at 1 degree within 6 m, 3 or more only within 4 m: with 3, robots of two
-frames that passed 5.5-7.5 m apart in office_e (seed 1) went unseen three times, and
-merged 150 s later, 4 m apart. One return is no object (noise, a wall's edge)."""
+gives 2 or more at 1 degree within 6 m, 3 or more only within 4 m. With 3, two robots of
+IPA office_e (random starts, seed 1) that passed each other 5.6-7.6 m apart at 576, 600
+and 697 s merged only at 727 s, 4 m apart; with 2, at 698 s. One return is no object
+(noise, a wall's edge)."""
 SMALL_OBJECT_SLACK_M = 0.15
 """How much wider than a robot a run of unexplained returns may be and still be one: the
 scan's noise and the viewer's motion during the sweep."""
