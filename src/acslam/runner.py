@@ -47,7 +47,7 @@ from acslam.files import write_text, write_yaml
 from acslam.geometry import transform_points
 from acslam.grid import UNKNOWN, GridSpec
 from acslam.messages import RobotMessage
-from acslam.pipeline.frames import FramedServer
+from acslam.pipeline.frames import FramedServer, sighting_reach_m
 from acslam.pipeline.server import Server
 from acslam.pipeline.snapshot import Snapshot
 from acslam.provenance import write_metrics
@@ -266,8 +266,7 @@ def finish_run(
     if log.last.frames:
         names = [robot_name(i) for i in range(scenario.robot_count)]
         config = scenario.config
-        # A teammate is a robot to a sighting only within this (frames.sighting).
-        reach_m = config.sensors.lidar.range_max_m - config.robots.radius_m
+        reach_m = sighting_reach_m(config.sensors.lidar.range_max_m, config.robots.radius_m)
         unknown_starts = merge_metrics(
             log.last, scenario.starts, truth.trajectories, names, scenario.world, reach_m
         )

@@ -556,6 +556,12 @@ SIGHTING_TOLERANCE_M = 0.15
 and the time between its pose and the scan."""
 
 
+def sighting_reach_m(range_max_m: float, radius_m: float) -> float:
+    """How far a robot of ``radius_m`` can be seen by a LiDAR of ``range_max_m``: its near
+    side must be in range, with beams beside it reaching farther."""
+    return range_max_m - radius_m
+
+
 def sighting(
     viewer_pose: np.ndarray,
     scan: LidarScan,
@@ -569,7 +575,9 @@ def sighting(
     scan cannot tell (out of range, hidden behind something nearer, a wall there)."""
     offset = np.asarray(target_xy) - viewer_pose[:2]
     distance_m = float(np.hypot(*offset))
-    if distance_m <= radius_m + tolerance_m or distance_m >= scan.range_max_m - radius_m:
+    if distance_m <= radius_m + tolerance_m or distance_m >= sighting_reach_m(
+        scan.range_max_m, radius_m
+    ):
         return None
     bearings = wrap_angles(scan.angles + viewer_pose[2] - math.atan2(offset[1], offset[0]))
     spacing = float(np.median(np.abs(np.diff(scan.angles)))) if len(scan.angles) > 1 else 0.0
