@@ -99,3 +99,24 @@ def test_dbscan_labels_equal_scikit_learns(seed: int) -> None:
     reference = DBSCAN(eps=eps_m, min_samples=min_points, algorithm="kd_tree").fit_predict(points_m)
     labels = dbscan_labels(cells, points_m, eps_m, min_points, int(eps_m / RES_M) + 1)
     np.testing.assert_array_equal(labels, reference)
+
+
+def test_a_cluster_needs_enough_cells_a_robot_may_stand_on() -> None:
+    """A frontier line running into a wall: the cells in the wall's lethal band count
+    toward the cluster's size, not toward the cells it needs. With one standable cell
+    fewer than ``min_cluster_size`` the line is dropped, with exactly that many it is a
+    cluster of all its cells."""
+    values = np.zeros(SPEC.shape, dtype=np.int8)
+    values[:, 50:] = 100  # a wall from column 50 on
+    costmap = compute_costmap(values, SPEC, CostmapConfig(), 0.1)
+    lethal_band = int(costmap.lethal[30, :50].sum())
+    assert lethal_band >= 2  # the robot radius is two cells
+    needed = CONFIG.min_cluster_size
+    for standable, kept in ((needed - 1, False), (needed, True)):
+        length = lethal_band + standable
+        line = np.stack([np.full(length, 30), np.arange(50 - length, 50)], axis=1)
+        clusters = cluster_frontiers(line, values, SPEC, costmap, CONFIG)
+        assert len(clusters) == int(kept)
+        if kept:
+            assert clusters[0].size_cells == length
+            assert not costmap.lethal[tuple(clusters[0].target_cell)]

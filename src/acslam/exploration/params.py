@@ -22,6 +22,7 @@ class DbscanParams(StageParams):
     name: Literal["dbscan"] = "dbscan"
     eps_m: PositiveFloat = 0.3
     min_points: Annotated[int, Field(ge=1)] = 5
+    # Cells a robot may stand on (outside the lethal band) a cluster needs.
     min_cluster_size: Annotated[int, Field(ge=1)] = 5
     # Information gain = unknown cells within this radius of a cluster's target cell: the
     # LiDAR's 8 m range (LidarConfig.range_max_m), what one scan from there could reveal.
@@ -109,8 +110,9 @@ class FactorGraphParams(UtilityParams):
     # the Hungarian baseline also sends the robots left over to their best cluster). The
     # thesis's lambda << 1 (0.01, the ``thesis`` allocator) prices sharing at ~1 m, so
     # robots crowd one frontier: over 10 seeds on experiments 1-5 with 3 robots it
-    # explored 2-31 % slower than Hungarian; 20 m is 8 % faster on experiment 4 and at
-    # most 5.4 % slower on the others (examples/grids/allocators-10-seeds.yaml).
+    # explored 2-31 % slower than Hungarian; 20 m is 3 % faster on experiment 4 and at
+    # most 2.3 % slower on experiments 1-3, but 11.5 % slower on experiment 5
+    # (examples/grids/allocators-10-seeds.yaml).
     conflict_lambda: FiniteFloat = -19.0
     # Exact max-product costs ~1 us per joint assignment (measured: 3 robots x 20
     # clusters 4 ms, 6x6 41 ms, 5x10 80 ms, 7x7 1.2 s): above 50 000 joint assignments
