@@ -8,7 +8,7 @@ A cluster needs ``min_cluster_size`` such cells, not only that many cells. Besid
 the floor cells the LiDAR only grazes stay unknown, and the free cells next to them are
 frontier cells in the wall's lethal band: on dungeon-40 (random starts, seed 0, unknown
 starts) a five-cell fragment with one standable cell came and went with each map update
-between 245 and 315 s, one cell either side of the size bound, and a robot 5-8 m from it
+between 245 and 315 s, now five cells, now four, and a robot 5-8 m from it
 turned back and forth between it and a cluster 20 m away for those 70 s. No robot can
 stand where such a fragment is, so no robot can see behind it.
 """
@@ -174,9 +174,10 @@ def cluster_frontiers(
         standable = ~costmap.lethal[member_cells[:, 0], member_cells[:, 1]]
         if standable.sum() < params.min_cluster_size:
             continue
-        centroid_m = points_m[members].mean(axis=0)
+        member_points_m = points_m[members]
+        centroid_m = member_points_m.mean(axis=0)
         candidates = member_cells[standable]
-        distance_sq = ((points_m[members][standable] - centroid_m) ** 2).sum(axis=1)
+        distance_sq = ((member_points_m[standable] - centroid_m) ** 2).sum(axis=1)
         target = candidates[int(np.argmin(distance_sq))]
         clusters.append(
             FrontierCluster(
