@@ -598,6 +598,13 @@ class ScanMatchingConfig(Section):
     # replay writes and the map it composes, is then as good as the keyframes' (one ICP
     # per scan; the graph does not change).
     place_scans_by_matching: bool = False
+    # Sequential and baseline matches use each keyframe's first this many scans, merged
+    # into the reference and stacked as the query, so each waits for the keyframe to
+    # close: it is made when the next keyframe opens (odometry carries the pose until
+    # then). 1: the keyframe's first scan alone, matched at once. The LDS-02's noise
+    # averages over the scans, the heading's walk less so
+    # (benchmarks/scan_matching_accuracy.py --keyframe-scans).
+    keyframe_scans: Annotated[int, Field(ge=1)] = 1
 
 
 def _stage_section(kind: str) -> Any:

@@ -24,30 +24,39 @@ STEP_M = 0.1
 TURN_RAD = 0.35
 
 
-def _drive(
-    baseline_m: float, turn_steps: int = 0, chain_gate_chi2: float = 16.27
-) -> list[tuple[int, int]]:
+def _drive_factors(
+    baseline_m: float,
+    turn_steps: int = 0,
+    chain_gate_chi2: float = 16.27,
+    keyframe_scans: int = 1,
+    noise_seed: int = 3,
+) -> list[tuple[int, int, np.ndarray]]:
     """Drive 3 m along a 6 m x 3 m box, a scan and an odometry step every 0.1 m, then
     turn on the spot ``turn_steps`` steps of 0.35 rad (a keyframe each); returns the
-    keyframe pairs of the verified sequential constraints."""
+    keyframe pairs of the verified sequential constraints, each with its error against
+    the true relative pose of the two keyframes' first scans."""
     occupied = np.zeros((60, 120), dtype=bool)  # 6 m x 3 m at 5 cm, walls all round
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True
     world = World("box", GridSpec(0.0, 0.0, 0.05, 60, 120), occupied)
-    sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(3))
+    sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(noise_seed))
     # Exact odometry, three steps to a keyframe: no calibration to rescale them.
     config = SlamConfig(keyframe_distance_m=0.3, odometry_calibration=False)
     slam = SlamBackend(config, {0: np.array([1.0, 1.5, 0.0])})
     lidar = LidarConstraints(
         ScanMatchingConfig(
-            sequential_baseline_m=baseline_m, baseline_chain_gate_chi2=chain_gate_chi2
+            sequential_baseline_m=baseline_m,
+            baseline_chain_gate_chi2=chain_gate_chi2,
+            keyframe_scans=keyframe_scans,
         )
     )
-    pairs = []
+    factors = []
+    truth = {}
     add = slam.scans.add_constraint
 
-    def record(index_a, index_b, *args) -> None:
-        pairs.append((slam.scans.keyframe(index_a)[1], slam.scans.keyframe(index_b)[1]))
-        add(index_a, index_b, *args)
+    def record(index_a, index_b, relative, *args) -> None:
+        error = relative - between(truth[index_a], truth[index_b])
+        factors.append((slam.scans.keyframe(index_a)[1], slam.scans.keyframe(index_b)[1], error))
+        add(index_a, index_b, relative, *args)
 
     slam.scans.add_constraint = record
     pose = np.array([1.0, 1.5, 0.0])
@@ -60,9 +69,18 @@ def _drive(
         scan = sensor.scan(0, k * 0.5, tuple(pose), np.zeros((0, 3)), -1)
         index = slam.add_scan(scan)
         if index is not None:
+            truth[index] = pose.copy()
             lidar.add_scan(slam, index, scan)
         slam.update()
-    return pairs
+    return factors
+
+
+def _drive(
+    baseline_m: float, turn_steps: int = 0, chain_gate_chi2: float = 16.27, keyframe_scans: int = 1
+) -> list[tuple[int, int]]:
+    """The keyframe pairs of :func:`_drive_factors`."""
+    factors = _drive_factors(baseline_m, turn_steps, chain_gate_chi2, keyframe_scans)
+    return [(a, b) for a, b, _ in factors]
 
 
 def test_each_keyframe_is_also_matched_to_the_latest_one_a_baseline_back() -> None:
@@ -85,6 +103,35 @@ def test_a_keyframe_is_the_baseline_of_one_later_keyframe_only() -> None:
     previous = {(k - 1, k) for k in range(1, 17)}
     baseline = {(k - 4, k) for k in range(4, 11)}
     assert set(pairs) == previous | baseline
+
+
+def test_with_three_scans_a_keyframe_is_matched_when_the_next_one_opens() -> None:
+    """The same pairs as with one scan, each made a keyframe later: the last keyframe,
+    which no keyframe follows, is matched to nothing."""
+    pairs = _drive(baseline_m=1.0, keyframe_scans=3)
+    previous = {(k - 1, k) for k in range(1, 10)}
+    baseline = {(k - 4, k) for k in range(4, 10)}
+    assert sorted(pairs) == sorted(previous | baseline)
+
+
+def test_three_scans_per_keyframe_cut_the_error_of_the_matches() -> None:
+    """Each keyframe's three scans (0.1 m apart, placed by exact odometry) on both sides
+    of its previous-keyframe match: the LDS-02's range noise is shared out over three
+    times the returns. RMS error over three noise seeds, one scan against three: heading
+    1.9 against 1.1 mrad, position 7.4 against 4.1 mm."""
+
+    def rms(keyframe_scans: int) -> np.ndarray:
+        errors = [
+            error
+            for seed in range(3)
+            for _, _, error in _drive_factors(0.0, keyframe_scans=keyframe_scans, noise_seed=seed)
+        ]
+        assert len(errors) >= 27
+        return np.sqrt(np.mean(np.square(errors), axis=0))
+
+    one, three = rms(1), rms(3)
+    assert three[2] <= 0.8 * one[2]
+    assert np.hypot(three[0], three[1]) <= 0.8 * np.hypot(one[0], one[1])
 
 
 def test_a_baseline_match_that_slid_from_the_chain_of_matches_it_spans_is_dropped(

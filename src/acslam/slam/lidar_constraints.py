@@ -23,7 +23,10 @@ slid to a wrong fit with a tight covariance (on thesis-exp2 seed 6 with two-keyf
 submaps, 0.15 m along the way at a 5 mm sigma) pulls the whole chain with it, and the
 odometry over several keyframes is too loose to tell. With ``place_scans_by_matching``
 the later scans of a keyframe are placed by a match against its first scan, not by
-odometry.
+odometry. With ``keyframe_scans`` n > 1 a sequential or baseline match takes the first n
+scans of each keyframe, merged into the reference and stacked as the query, and so is
+made when the next keyframe opens: one scan's noise is what the LDS-02's matches mostly
+err by, and n scans share it out.
 """
 
 from __future__ import annotations
@@ -35,10 +38,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between, compose
+from acslam.geometry import between, compose, transform_points
 from acslam.mapping.scan_matching import (
     PreparedScan,
     ScanMatchResult,
+    ScanPoints,
     disagreement_sq,
     match_scans,
     merged_reference,
@@ -102,6 +106,9 @@ class LidarConstraints:
         self._checks_chain = (
             config.baseline_chain_gate_chi2 > 0 and config.sequential_baseline_m > 0
         )
+        # robot -> keyframe -> its later scans kept for matching (keyframe_scans > 1), as
+        # (scan index, returns).
+        self._later_scans: dict[int, dict[int, list[tuple[int, ScanPoints]]]] = {}
         self.sequential_added = 0
         self.sequential_rejected = 0
         self.loops_added = 0
@@ -114,15 +121,21 @@ class LidarConstraints:
         scan: LidarScan,
         blind_sectors: np.ndarray | None = None,
     ) -> None:
-        """Keep the first scan of each keyframe; match it to the previous keyframe's and
-        to the baseline keyframe's (a later scan of a keyframe is only placed by a match,
-        with ``place_scans_by_matching``). ``blind_sectors``: where teammates blocked its
-        view."""
+        """Keep the first scan of each keyframe (and the next ``keyframe_scans - 1``); match
+        the keyframe to the previous keyframe and to the baseline keyframe: at its first
+        scan, or with ``keyframe_scans`` > 1 once the next keyframe opens and its later
+        scans are in (a later scan is also placed by a match, with
+        ``place_scans_by_matching``). ``blind_sectors``: where teammates blocked its view."""
         robot_id, keyframe = slam.scans.keyframe(scan_index)
         first = self._by_keyframe.get((robot_id, keyframe))
         if first is not None:
             if self.config.place_scans_by_matching:
                 self._place(slam, self._entries[first], scan_index, scan)
+            if self.config.keyframe_scans > 1:
+                later = self._later_scans.setdefault(robot_id, {}).setdefault(keyframe, [])
+                if len(later) < self.config.keyframe_scans - 1:
+                    returns = scan_points(scan.angles, scan.ranges, self.config)
+                    later.append((scan_index, returns))
             return
         prepared = prepare_scan(scan.angles, scan.ranges, self.config, blind_sectors)
         previous = self._by_keyframe.get((robot_id, keyframe - 1))
@@ -137,27 +150,72 @@ class LidarConstraints:
         self._by_keyframe[(robot_id, keyframe)] = len(self._entries)
         self._entries.append(_KeyframeScan(scan_index, robot_id, scan.stamp, prepared, path_m))
         self._candidates.add(robot_id, scan.stamp)
+        if self.config.keyframe_scans == 1:
+            self._match_sequential(slam, robot_id, keyframe)
+        elif previous is not None:  # the previous keyframe has all its scans now
+            self._match_sequential(slam, robot_id, keyframe - 1)
+            self._forget_later_scans(robot_id, keyframe - 1)
+
+    def _match_sequential(self, slam: SlamBackend, robot_id: int, keyframe: int) -> None:
+        """Match the keyframe to the previous one (or its submap) and to its baseline
+        keyframe, if they exist."""
+        previous = self._by_keyframe.get((robot_id, keyframe - 1))
         if previous is None:
             return
-        reference = self._submap(slam, robot_id, keyframe - 1)
-        result = self._constrain(slam, self._entries[previous], self._entries[-1], reference)
+        entry = self._entries[self._by_keyframe[(robot_id, keyframe)]]
+        query = self._keyframe_query(slam, entry)
+        reference = self._submap(slam, robot_id, keyframe - 1, self.submap_keyframes)
+        result = self._constrain(slam, self._entries[previous], entry, reference, query=query)
         self._count(result)
         if result is not None:
             if self._checks_chain:
                 self._steps.setdefault(robot_id, {})[keyframe] = result
             # The span of one keyframe's odometry: what calibrates it.
             slam.calibrate_odometry(
-                robot_id, self._entries[previous].stamp_s, scan.stamp, result.relative,
+                robot_id, self._entries[previous].stamp_s, entry.stamp_s, result.relative,
                 result.covariance,
             )  # fmt: skip
-        baseline = self._baseline_partner(robot_id, keyframe, path_m)
+        baseline = self._baseline_partner(robot_id, keyframe, entry.path_m)
         if baseline is not None:
             since = slam.scans.keyframe(baseline.scan_index)[1]
             chain = self._chain(slam, robot_id, since, keyframe)
-            self._count(self._constrain(slam, baseline, self._entries[-1], chain=chain))
+            reference = self._submap(slam, robot_id, since, 1)
+            self._count(self._constrain(slam, baseline, entry, reference, chain=chain, query=query))
             steps = self._steps.get(robot_id, {})
             for older in [k for k in steps if k <= since]:
                 del steps[older]
+
+    def _keyframe_query(self, slam: SlamBackend, entry: _KeyframeScan) -> ScanPoints:
+        """The keyframe's first scan, and its later scans kept, stacked in the first
+        scan's frame where odometry (or ``place_scans_by_matching``) put them."""
+        later = self._later_scans.get(entry.robot_id, {}).get(
+            slam.scans.keyframe(entry.scan_index)[1], []
+        )
+        if not later:
+            return entry.scan
+        base = slam.scans.pose(entry.scan_index)
+        points = np.vstack(
+            [entry.scan.points_m]
+            + [transform_points(between(base, slam.scans.pose(i)), s.points_m) for i, s in later]
+        )
+        ranges = np.hypot(points[:, 0], points[:, 1])
+        return ScanPoints(points, ranges, points / ranges[:, None])
+
+    def _forget_later_scans(self, robot_id: int, matched: int) -> None:
+        """Drop the later scans that no match will use again: those of keyframes before
+        the submap of the next match and before the latest keyframe already
+        ``sequential_baseline_m`` behind ``matched`` (later baseline partners are never
+        older than that one)."""
+        kept = self._later_scans.get(robot_id, {})
+        path_m = self._entries[self._by_keyframe[(robot_id, matched)]].path_m
+        oldest = matched - 1
+        while (entry := self._by_keyframe.get((robot_id, oldest))) is not None and (
+            path_m - self._entries[entry].path_m < self.config.sequential_baseline_m
+        ):
+            oldest -= 1
+        oldest = min(oldest, matched - self.submap_keyframes + 1)
+        for keyframe in [k for k in kept if k < oldest]:
+            del kept[keyframe]
 
     def _count(self, result: ScanMatchResult | None) -> None:
         if result is None:
@@ -307,20 +365,25 @@ class LidarConstraints:
             return None
         return result
 
-    def _submap(self, slam: SlamBackend, robot_id: int, last: int) -> PreparedScan:
-        """Scans of keyframes ``last - submap_keyframes + 1 .. last`` of one robot, in the
-        sensor frame of ``last`` (just ``last``'s scan when the submap is one keyframe)."""
+    def _submap(self, slam: SlamBackend, robot_id: int, last: int, keyframes: int) -> PreparedScan:
+        """Scans of keyframes ``last - keyframes + 1 .. last`` of one robot, the later
+        scans kept of each too, in the sensor frame of ``last`` (just ``last``'s first scan
+        when that is all)."""
         base = self._entries[self._by_keyframe[(robot_id, last)]]
-        if self.submap_keyframes == 1:
+        kept = self._later_scans.get(robot_id, {})
+        if keyframes == 1 and not kept.get(last):
             return base.scan
         base_pose = slam.scans.pose(base.scan_index)
         scans = []
-        for keyframe in range(last, max(last - self.submap_keyframes, -1), -1):
+        for keyframe in range(last, max(last - keyframes, -1), -1):
             entry = self._by_keyframe.get((robot_id, keyframe))
             if entry is None:
                 continue
-            scan = self._entries[entry]
-            scans.append((between(base_pose, slam.scans.pose(scan.scan_index)), scan.scan))
+            first = self._entries[entry]
+            # Newest first: the voxel filter keeps a cell's first return.
+            for index, later in reversed(kept.get(keyframe, [])):
+                scans.append((between(base_pose, slam.scans.pose(index)), later))
+            scans.append((between(base_pose, slam.scans.pose(first.scan_index)), first.scan))
         return merged_reference(scans, self.config)
 
     def _constrain(
@@ -330,15 +393,17 @@ class LidarConstraints:
         b: _KeyframeScan,
         reference: PreparedScan | None = None,
         chain: tuple[np.ndarray, np.ndarray] | None = None,
+        query: ScanPoints | None = None,
     ) -> ScanMatchResult | None:
-        """Match b to a (or to ``reference``, a submap in a's frame), sequential keyframes
-        of one robot, and add the factor if the match is verified and agrees with the
-        odometry between them and with ``chain`` (the composed matches between them, as
-        relative pose and covariance), if given; returns the match, or None if it was not
-        added."""
+        """Match b (or ``query``, returns in b's frame) to a (or to ``reference``, a submap
+        in a's frame), sequential keyframes of one robot, and add the factor if the match
+        is verified and agrees with the odometry between them and with ``chain`` (the
+        composed matches between them, as relative pose and covariance), if given; returns
+        the match, or None if it was not added."""
         guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
         reference = a.scan if reference is None else reference
-        result = match_scans(reference, b.scan, guess, self.config, guess_from_odometry=True)
+        query = b.scan if query is None else query
+        result = match_scans(reference, query, guess, self.config, guess_from_odometry=True)
         robot_id, since = slam.scans.keyframe(a.scan_index)
         odometry_covariance = slam.odometry_chain_covariance(
             robot_id, since, slam.scans.keyframe(b.scan_index)[1]
