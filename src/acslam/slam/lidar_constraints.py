@@ -165,7 +165,7 @@ class LidarConstraints:
         entry = self._entries[self._by_keyframe[(robot_id, keyframe)]]
         query = self._keyframe_query(slam, entry)
         reference = self._submap(slam, robot_id, keyframe - 1, self.submap_keyframes)
-        result = self._constrain(slam, self._entries[previous], entry, reference, query=query)
+        result = self._constrain(slam, self._entries[previous], entry, reference, query)
         self._count(result)
         if result is not None:
             if self._checks_chain:
@@ -180,7 +180,7 @@ class LidarConstraints:
             since = slam.scans.keyframe(baseline.scan_index)[1]
             chain = self._chain(slam, robot_id, since, keyframe)
             reference = self._submap(slam, robot_id, since, 1)
-            self._count(self._constrain(slam, baseline, entry, reference, chain=chain, query=query))
+            self._count(self._constrain(slam, baseline, entry, reference, query, chain))
             steps = self._steps.get(robot_id, {})
             for older in [k for k in steps if k <= since]:
                 del steps[older]
@@ -391,18 +391,16 @@ class LidarConstraints:
         slam: SlamBackend,
         a: _KeyframeScan,
         b: _KeyframeScan,
-        reference: PreparedScan | None = None,
+        reference: PreparedScan,
+        query: ScanPoints,
         chain: tuple[np.ndarray, np.ndarray] | None = None,
-        query: ScanPoints | None = None,
     ) -> ScanMatchResult | None:
-        """Match b (or ``query``, returns in b's frame) to a (or to ``reference``, a submap
-        in a's frame), sequential keyframes of one robot, and add the factor if the match
-        is verified and agrees with the odometry between them and with ``chain`` (the
-        composed matches between them, as relative pose and covariance), if given; returns
-        the match, or None if it was not added."""
+        """Match ``query`` (returns in b's frame) to ``reference`` (in a's frame), of
+        keyframes a and b of one robot, and add the factor between them if the match is
+        verified and agrees with the odometry between them and with ``chain`` (the composed
+        matches between them, as relative pose and covariance), if given; returns the
+        match, or None if it was not added."""
         guess = between(slam.scans.pose(a.scan_index), slam.scans.pose(b.scan_index))
-        reference = a.scan if reference is None else reference
-        query = b.scan if query is None else query
         result = match_scans(reference, query, guess, self.config, guess_from_odometry=True)
         robot_id, since = slam.scans.keyframe(a.scan_index)
         odometry_covariance = slam.odometry_chain_covariance(
