@@ -34,12 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from acslam.config import AlgorithmsConfig, ScanMatchingConfig
-from acslam.geometry import between, compose, transform_points, wrap_angle
+from acslam.geometry import between, compose, wrap_angle
 from acslam.mapping.scan_matching import (
-    ScanPoints,
     match_scans,
     merged_reference,
     scan_points,
+    stacked_scans,
     verify,
 )
 from acslam.replay import algorithms_config
@@ -111,15 +111,6 @@ def keyframe_scans(
     return robots, matching
 
 
-def stacked(scans: list) -> ScanPoints:
-    """A keyframe's scans as one query: their points in the first scan's frame."""
-    if len(scans) == 1:
-        return scans[0][2]
-    points = np.vstack([transform_points(placed, scan.points_m) for _, placed, scan in scans])
-    ranges = np.hypot(points[:, 0], points[:, 1])
-    return ScanPoints(points, ranges, points / ranges[:, None])
-
-
 def score(
     robots: list[list], config: ScanMatchingConfig, submap: int, scans_per_keyframe: int, seed: int
 ) -> dict:
@@ -130,7 +121,9 @@ def score(
         for index in range(submap, len(keyframes)):
             pose_a = keyframes[index - 1][0][0]
             pose_b = keyframes[index][0][0]
-            query = stacked(keyframes[index][:scans_per_keyframe])
+            query = stacked_scans(
+                [(placed, points) for _, placed, points in keyframes[index][:scans_per_keyframe]]
+            )
             truth = between(pose_a, pose_b)
             guess = truth + rng.normal(0.0, GUESS_SIGMAS)
             start = time.perf_counter()

@@ -223,6 +223,16 @@ def merged_reference(
     )
 
 
+def stacked_scans(scans: list[tuple[np.ndarray, ScanPoints]]) -> ScanPoints:
+    """One query from several scans, each given with its sensor pose in the first one's
+    frame: their returns in that frame, as seen from its origin (one scan: itself)."""
+    if len(scans) == 1:
+        return scans[0][1]
+    points = np.vstack([transform_points(pose, scan.points_m) for pose, scan in scans])
+    ranges = np.hypot(points[:, 0], points[:, 1])
+    return ScanPoints(points, ranges, points / ranges[:, None])
+
+
 MIN_FIT_HADAMARD_RATIO = 1e-6
 """A fit whose (scaled) normal matrix is closer to singular than this (the neighbours
 bunched at one place along the line) falls back to their centroid's line."""

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from acslam.config import ScanMatchingConfig
-from acslam.geometry import between, compose, transform_points
+from acslam.geometry import between, compose
 from acslam.mapping.scan_matching import (
     PreparedScan,
     ScanMatchResult,
@@ -48,6 +48,7 @@ from acslam.mapping.scan_matching import (
     merged_reference,
     prepare_scan,
     scan_points,
+    stacked_scans,
     verify,
     with_restart_spread,
 )
@@ -191,15 +192,11 @@ class LidarConstraints:
         later = self._later_scans.get(entry.robot_id, {}).get(
             slam.scans.keyframe(entry.scan_index)[1], []
         )
-        if not later:
-            return entry.scan
         base = slam.scans.pose(entry.scan_index)
-        points = np.vstack(
-            [entry.scan.points_m]
-            + [transform_points(between(base, slam.scans.pose(i)), s.points_m) for i, s in later]
+        return stacked_scans(
+            [(np.zeros(3), entry.scan)]
+            + [(between(base, slam.scans.pose(index)), scan) for index, scan in later]
         )
-        ranges = np.hypot(points[:, 0], points[:, 1])
-        return ScanPoints(points, ranges, points / ranges[:, None])
 
     def _forget_later_scans(self, robot_id: int, matched: int) -> None:
         """Drop the later scans that no match will use again: those of keyframes before
