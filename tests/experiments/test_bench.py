@@ -34,11 +34,14 @@ def test_ratio_is_value_over_reference_and_json_keeps_it(tmp_path: Path) -> None
 
 
 def test_scan_matching_figure_is_measured_against_its_reference() -> None:
-    figure, window, everywhere = bench_scan_matching(quick=True)
+    figure, nearest, window, everywhere = bench_scan_matching(quick=True)
     assert figure.value > 0 and figure.reference_value > 0
     assert figure.ratio == pytest.approx(figure.value / figure.reference_value)
     # ICP of 360-beam scans costs far more than building one scan's KD-tree.
     assert figure.ratio > 1
+    # The correspondence search is timed against cKDTree on the same points.
+    assert nearest.reference == "cKDTree query of the same points"
+    assert nearest.value > 0 and nearest.reference_value > 0
     # Branch and bound is timed against the exhaustive search of the same poses, and
     # the benchmark checks that both found the same one.
     assert window.reference == "exhaustive search of the same poses"

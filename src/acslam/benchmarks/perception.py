@@ -29,7 +29,7 @@ from acslam.exploration.frontiers import (
     reachable_frontier_cells,
 )
 from acslam.exploration.params import DbscanParams, FactorGraphParams
-from acslam.geometry import compose
+from acslam.geometry import compose, transform_points
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window, bresenham
 from acslam.mapping.correlative import (
     LikelihoodPyramid,
@@ -242,8 +242,13 @@ def bench_scan_matching(quick: bool) -> list[Figure]:
     query = prepare_scan(scan_b.angles, scan_b.ranges, config)
     guess = np.array([0.3, -0.2, 0.15]) + np.array([0.05, -0.05, 0.03])
     repeats = 50 if quick else 300
+    tree = cKDTree(reference.points_m)
     tree_ms = median_ms(lambda: cKDTree(reference.points_m), repeats)
     match_ms = median_ms(lambda: match_scans(reference, query, guess, config), repeats)
+    moved = transform_points(guess, query.points_m)
+    gate_m = config.gate_min_m
+    grid_ms = median_ms(lambda: reference.grid.nearest_within(moved, gate_m), repeats)
+    tree_query_ms = median_ms(lambda: tree.query(moved, distance_upper_bound=gate_m), repeats)
     return [
         Figure(
             "scan matching",
@@ -253,6 +258,15 @@ def bench_scan_matching(quick: bool) -> list[Figure]:
             "cKDTree build of one scan",
             tree_ms,
             "goal <= 5 ms",
+        ),
+        Figure(
+            "scan matching",
+            "nearest reference points within the gate, grid (one ICP iteration)",
+            grid_ms,
+            "ms",
+            "cKDTree query of the same points",
+            tree_query_ms,
+            f"{len(moved)} points against {len(reference.points_m)}, {gate_m} m gate",
         ),
         *_global_matching_figures(quick, tree_ms),
     ]
