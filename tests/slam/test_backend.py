@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -380,6 +381,30 @@ def test_scan_constraint_overrides_biased_odometry() -> None:
     # kf_1 = scan_0 * 1.15 m * (0.05 m offset)^-1 = 1.10 m; odometry (1.0 m) is much looser.
     assert poses[1, 0] == pytest.approx(1.1, abs=2e-3)
     assert backend.scans.pose(second)[0] == pytest.approx(1.15, abs=2e-3)
+
+
+def test_scans_of_one_keyframe_are_placed_relative_to_each_other_by_their_offsets() -> None:
+    """Two scans after one keyframe (0.3 m and 0.5 m of odometry, a 0.2 rad turn between):
+    the second's pose in the first's frame, whatever the keyframe's estimate; scans of two
+    keyframes have no such pose."""
+    backend = SlamBackend(SlamConfig(keyframe_distance_m=1.0), {0: np.array([2.0, 1.0, 0.7])})
+    empty = LidarScan(0, 0.0, np.zeros(1), np.zeros(1), 8.0)
+    backend.add_odometry(OdometryIncrement(0, 0.5, 0.0, 0.3, 0.0, 0.0))
+    first = backend.add_scan(replace(empty, stamp=0.5))
+    backend.add_odometry(OdometryIncrement(0, 1.0, 0.5, 0.2, 0.0, 0.2))
+    second = backend.add_scan(replace(empty, stamp=1.0))
+    backend.add_odometry(OdometryIncrement(0, 2.0, 1.0, 0.9, 0.0, 0.0))
+    third = backend.add_scan(replace(empty, stamp=2.0))
+    assert backend.scans.keyframe(first) == backend.scans.keyframe(second) == (0, 0)
+    assert backend.scans.keyframe(third) == (0, 1)
+    backend.update()
+    relative = backend.scans.relative(first, second)
+    np.testing.assert_allclose(relative, [0.2, 0.0, 0.2], atol=1e-12)
+    np.testing.assert_allclose(
+        relative, between(backend.scans.pose(first), backend.scans.pose(second)), atol=1e-12
+    )
+    with pytest.raises(ValueError, match="different keyframes"):
+        backend.scans.relative(first, third)
 
 
 def test_isam2_speed_measurement_is_consistent() -> None:

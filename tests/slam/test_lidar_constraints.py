@@ -114,6 +114,24 @@ def test_with_three_scans_a_keyframe_is_matched_when_the_next_one_opens() -> Non
     assert sorted(pairs) == sorted(previous | baseline)
 
 
+def test_with_three_scans_each_keyframe_is_merged_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Keyframes 0-8 are previous-keyframe references and 0-5 also baselines: nine merges,
+    not fifteen, and the same pairs as when every reference is merged anew."""
+    merged = []
+
+    def counting(scans, config):
+        merged.append(len(scans))
+        return merge(scans, config)
+
+    merge = lidar_constraints.merged_reference
+    monkeypatch.setattr(lidar_constraints, "merged_reference", counting)
+    pairs = _drive(baseline_m=1.0, keyframe_scans=3)
+    assert merged == [3] * 9
+    previous = {(k - 1, k) for k in range(1, 10)}
+    baseline = {(k - 4, k) for k in range(4, 10)}
+    assert sorted(pairs) == sorted(previous | baseline)
+
+
 def test_three_scans_per_keyframe_cut_the_error_of_the_matches() -> None:
     """Each keyframe's three scans (0.1 m apart, placed by exact odometry) on both sides
     of its previous-keyframe match: the LDS-02's range noise is shared out over three

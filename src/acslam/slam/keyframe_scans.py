@@ -76,6 +76,16 @@ class KeyframeScans:
         _, key, offset = self._scans[index]
         return compose(pose2_to_planar(self.backend.pose_estimate(key)), offset)
 
+    def relative(self, index_a: int, index_b: int) -> np.ndarray:
+        """Scan b's sensor pose in scan a's frame, both of one keyframe: from their offsets
+        alone, so the same bits whatever the keyframe's estimate (what is built of a
+        keyframe's scans can be kept)."""
+        _, key_a, offset_a = self._scans[index_a]
+        _, key_b, offset_b = self._scans[index_b]
+        if key_a != key_b:
+            raise ValueError(f"scans {index_a} and {index_b} belong to different keyframes")
+        return between(offset_a, offset_b)
+
     def positions(self, indices: np.ndarray) -> np.ndarray:
         """(k, 2) current world positions of many stored scans at once: :meth:`pose`'s
         ``[x, y]``, vectorised, equal to it up to rounding (see

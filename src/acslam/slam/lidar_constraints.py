@@ -110,6 +110,10 @@ class LidarConstraints:
         # robot -> keyframe -> its later scans kept for matching (keyframe_scans > 1), as
         # (scan index, returns).
         self._later_scans: dict[int, dict[int, list[tuple[int, ScanPoints]]]] = {}
+        # robot -> keyframe -> its scans merged into one reference, built when first asked
+        # for and kept while its later scans are (the same keyframe is the next one's
+        # reference and, later, often a baseline).
+        self._merged: dict[int, dict[int, PreparedScan]] = {}
         self.sequential_added = 0
         self.sequential_rejected = 0
         self.loops_added = 0
@@ -188,14 +192,14 @@ class LidarConstraints:
 
     def _keyframe_query(self, slam: SlamBackend, entry: _KeyframeScan) -> ScanPoints:
         """The keyframe's first scan, and its later scans kept, stacked in the first
-        scan's frame where odometry (or ``place_scans_by_matching``) put them."""
+        scan's frame where odometry (or ``place_scans_by_matching``) put them
+        (:meth:`KeyframeScans.relative`)."""
         later = self._later_scans.get(entry.robot_id, {}).get(
             slam.scans.keyframe(entry.scan_index)[1], []
         )
-        base = slam.scans.pose(entry.scan_index)
         return stacked_scans(
             [(np.zeros(3), entry.scan)]
-            + [(between(base, slam.scans.pose(index)), scan) for index, scan in later]
+            + [(slam.scans.relative(entry.scan_index, index), scan) for index, scan in later]
         )
 
     def _forget_later_scans(self, robot_id: int, matched: int) -> None:
@@ -211,8 +215,10 @@ class LidarConstraints:
         ):
             oldest -= 1
         oldest = min(oldest, matched - self.submap_keyframes + 1)
+        merged = self._merged.get(robot_id, {})
         for keyframe in [k for k in kept if k < oldest]:
             del kept[keyframe]
+            merged.pop(keyframe, None)
 
     def _count(self, result: ScanMatchResult | None) -> None:
         if result is None:
@@ -365,11 +371,16 @@ class LidarConstraints:
     def _submap(self, slam: SlamBackend, robot_id: int, last: int, keyframes: int) -> PreparedScan:
         """Scans of keyframes ``last - keyframes + 1 .. last`` of one robot, the later
         scans kept of each too, in the sensor frame of ``last`` (just ``last``'s first scan
-        when that is all)."""
+        when that is all). A keyframe's scans are placed by their offsets within it
+        (:meth:`KeyframeScans.relative`), keyframes by their estimates; so one keyframe's
+        merged scans are the same whenever built, and are built once."""
         base = self._entries[self._by_keyframe[(robot_id, last)]]
         kept = self._later_scans.get(robot_id, {})
         if keyframes == 1 and not kept.get(last):
             return base.scan
+        merged = self._merged.setdefault(robot_id, {})
+        if keyframes == 1 and last in merged:
+            return merged[last]
         base_pose = slam.scans.pose(base.scan_index)
         scans = []
         for keyframe in range(last, max(last - keyframes, -1), -1):
@@ -377,11 +388,15 @@ class LidarConstraints:
             if entry is None:
                 continue
             first = self._entries[entry]
+            placed = between(base_pose, slam.scans.pose(first.scan_index))
             # Newest first: the voxel filter keeps a cell's first return.
             for index, later in reversed(kept.get(keyframe, [])):
-                scans.append((between(base_pose, slam.scans.pose(index)), later))
-            scans.append((between(base_pose, slam.scans.pose(first.scan_index)), first.scan))
-        return merged_reference(scans, self.config)
+                scans.append((compose(placed, slam.scans.relative(first.scan_index, index)), later))
+            scans.append((placed, first.scan))
+        reference = merged_reference(scans, self.config)
+        if keyframes == 1:
+            merged[last] = reference
+        return reference
 
     def _constrain(
         self,
