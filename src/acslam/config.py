@@ -604,7 +604,7 @@ class ScanMatchingConfig(Section):
     # then). 1: the keyframe's first scan alone, matched at once. With the LDS-02, three
     # scans drift a third less in heading over 20 matches
     # (benchmarks/scan_matching_accuracy.py --keyframe-scans); the floor-plan examples
-    # use 3 (README).
+    # use 3 (README). A match whose keyframes saw a teammate uses their first scans.
     keyframe_scans: Annotated[int, Field(ge=1)] = 1
 
 

@@ -30,11 +30,13 @@ def _drive_factors(
     chain_gate_chi2: float = 16.27,
     keyframe_scans: int = 1,
     noise_seed: int = 3,
+    blind_sectors: np.ndarray | None = None,
 ) -> list[tuple[int, int, np.ndarray]]:
     """Drive 3 m along a 6 m x 3 m box, a scan and an odometry step every 0.1 m, then
     turn on the spot ``turn_steps`` steps of 0.35 rad (a keyframe each); returns the
     keyframe pairs of the verified sequential constraints, each with its error against
-    the true relative pose of the two keyframes' first scans."""
+    the true relative pose of the two keyframes' first scans. ``blind_sectors``: every
+    scan's, as if a teammate stood in view."""
     occupied = np.zeros((60, 120), dtype=bool)  # 6 m x 3 m at 5 cm, walls all round
     occupied[[0, -1], :] = occupied[:, [0, -1]] = True
     world = World("box", GridSpec(0.0, 0.0, 0.05, 60, 120), occupied)
@@ -70,7 +72,7 @@ def _drive_factors(
         index = slam.add_scan(scan)
         if index is not None:
             truth[index] = pose.copy()
-            lidar.add_scan(slam, index, scan)
+            lidar.add_scan(slam, index, scan, blind_sectors)
         slam.update()
     return factors
 
@@ -130,6 +132,36 @@ def test_with_three_scans_each_keyframe_is_merged_once(monkeypatch: pytest.Monke
     previous = {(k - 1, k) for k in range(1, 10)}
     baseline = {(k - 4, k) for k in range(4, 10)}
     assert sorted(pairs) == sorted(previous | baseline)
+
+
+def test_beside_a_teammate_a_keyframe_is_matched_by_its_first_scan(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A teammate in view of every scan (a blind sector behind the robot): with three
+    scans per keyframe the same pairs, a keyframe later, but each query a single scan (at
+    most 360 returns) and no reference merged; in view of none, the queries stack."""
+    queries, merged = [], []
+
+    def recording(reference, query, guess, config, guess_from_odometry=False):
+        queries.append(len(query.points_m))
+        return match(reference, query, guess, config, guess_from_odometry)
+
+    def counting(scans, config):
+        merged.append(len(scans))
+        return merge(scans, config)
+
+    match, merge = lidar_constraints.match_scans, lidar_constraints.merged_reference
+    monkeypatch.setattr(lidar_constraints, "match_scans", recording)
+    monkeypatch.setattr(lidar_constraints, "merged_reference", counting)
+    teammate = np.array([[2.8, 3.4, 0.6]])
+    factors = _drive_factors(1.0, keyframe_scans=3, blind_sectors=teammate)
+    previous = {(k - 1, k) for k in range(1, 10)}
+    baseline = {(k - 4, k) for k in range(4, 10)}
+    assert sorted((a, b) for a, b, _ in factors) == sorted(previous | baseline)
+    assert len(queries) == 15 and max(queries) <= LidarConfig().beams and merged == []
+    queries.clear()
+    _drive_factors(1.0, keyframe_scans=3)
+    assert min(queries) > LidarConfig().beams and len(merged) == 9
 
 
 def test_three_scans_per_keyframe_cut_the_error_of_the_matches() -> None:
