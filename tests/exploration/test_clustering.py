@@ -97,7 +97,7 @@ def test_dbscan_labels_equal_scikit_learns(seed: int) -> None:
     eps_m = float(rng.choice([0.1, 0.25, 0.3, 0.33]))
     min_points = int(rng.choice([3, 5, 8]))
     reference = DBSCAN(eps=eps_m, min_samples=min_points, algorithm="kd_tree").fit_predict(points_m)
-    labels = dbscan_labels(cells, points_m, eps_m, min_points, int(eps_m / RES_M) + 1)
+    labels = dbscan_labels(cells, points_m, eps_m, min_points, RES_M)
     np.testing.assert_array_equal(labels, reference)
 
 
