@@ -120,28 +120,42 @@ def window_around(spec: GridSpec, center_xy_m: np.ndarray, half_size_m: float) -
     return Window(r0, c0, local)
 
 
+@numba.njit(cache=True, nogil=True)
+def bresenham_start(r0: int, c0: int, r1: int, c1: int) -> tuple[int, int, int, int, int, int]:
+    """Bresenham's line from ``(r0, c0)`` to ``(r1, c1)``: its cell count minus one and
+    the state :func:`bresenham_step` advances, ``(error, row span, column span, row step,
+    column step)``. Stepping a line cell by cell, instead of building
+    :func:`bresenham`'s array, spares a hot loop an allocation per line."""
+    drow, dcol = abs(r1 - r0), abs(c1 - c0)
+    return max(drow, dcol), dcol - drow, drow, dcol, 1 if r1 >= r0 else -1, 1 if c1 >= c0 else -1
+
+
+@numba.njit(cache=True, nogil=True)
+def bresenham_step(
+    r: int, c: int, err: int, drow: int, dcol: int, step_r: int, step_c: int
+) -> tuple[int, int, int]:
+    """The line's next cell after ``(r, c)`` and the new error (see :func:`bresenham_start`)."""
+    twice = 2 * err
+    if twice >= -drow:
+        err -= drow
+        c += step_c
+    if twice <= dcol:
+        err += dcol
+        r += step_r
+    return r, c, err
+
+
 @numba.njit(cache=True)
 def bresenham(r0: int, c0: int, r1: int, c1: int) -> np.ndarray:
     """Cells of the Bresenham line from ``(r0, c0)`` to ``(r1, c1)``, both included.
 
     Returns an (N, 2) int64 array of ``[row, col]`` in order from the start cell.
     """
-    dr = abs(r1 - r0)
-    dc = abs(c1 - c0)
-    sr = 1 if r1 >= r0 else -1
-    sc = 1 if c1 >= c0 else -1
-    n = max(dr, dc) + 1
-    out = np.empty((n, 2), dtype=np.int64)
-    err = dc - dr
+    steps, err, drow, dcol, step_r, step_c = bresenham_start(r0, c0, r1, c1)
+    out = np.empty((steps + 1, 2), dtype=np.int64)
     r, c = r0, c0
-    for i in range(n):
+    for i in range(steps + 1):
         out[i, 0] = r
         out[i, 1] = c
-        e2 = 2 * err
-        if e2 >= -dr:
-            err -= dr
-            c += sc
-        if e2 <= dc:
-            err += dc
-            r += sr
+        r, c, err = bresenham_step(r, c, err, drow, dcol, step_r, step_c)
     return out
