@@ -65,14 +65,24 @@ _RELATIVE_TOLERANCE = 1e-3
 _ABSOLUTE_TOLERANCE = 1e-5
 
 
+def _hinge(distance_m: np.ndarray, influence_m: float) -> np.ndarray:
+    """Eqs. 4.63 and 4.65: ``1 - d / d_max`` within the influence, 0 beyond."""
+    return np.where(distance_m < influence_m, 1.0 - distance_m / influence_m, 0.0)
+
+
+def _robot_offsets(xy_r_m: np.ndarray, xy_s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 2) offsets of ``xy_r`` from ``xy_s`` and their (M,) lengths."""
+    delta = np.asarray(xy_r_m, dtype=float) - np.asarray(xy_s_m, dtype=float)
+    return delta, np.hypot(delta[:, 0], delta[:, 1])
+
+
 def obstacle_errors(
     xy_m: np.ndarray, field: DistanceField, influence_m: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 4.63 at (M, 2) positions: errors (M,) and their Jacobians (M, 2) w.r.t. ``xy``."""
     distance, gradient = field.value_and_gradient(xy_m)
     inside = distance < influence_m
-    error = np.where(inside, 1.0 - distance / influence_m, 0.0)
-    return error, np.where(inside[:, None], -gradient / influence_m, 0.0)
+    return _hinge(distance, influence_m), np.where(inside[:, None], -gradient / influence_m, 0.0)
 
 
 def robot_errors(
@@ -83,13 +93,11 @@ def robot_errors(
     The Jacobian w.r.t. ``xy_s`` is the negative. Coincident robots are pushed apart
     along +x rather than getting an undefined direction.
     """
-    delta = np.asarray(xy_r_m, dtype=float) - np.asarray(xy_s_m, dtype=float)
-    distance = np.hypot(delta[:, 0], delta[:, 1])
+    delta, distance = _robot_offsets(xy_r_m, xy_s_m)
     inside = distance < influence_m
     apart = distance > 1e-9
     unit = np.where(apart[:, None], delta / np.where(apart, distance, 1.0)[:, None], [1.0, 0.0])
-    error = np.where(inside, 1.0 - distance / influence_m, 0.0)
-    return error, np.where(inside[:, None], -unit / influence_m, 0.0)
+    return _hinge(distance, influence_m), np.where(inside[:, None], -unit / influence_m, 0.0)
 
 
 @dataclass(frozen=True)
@@ -224,25 +232,29 @@ class FactorGraphPlanner:
         return FgpResult(commands, trajectories, cost, iterations)
 
     def residuals(self, problem: FgpProblem, x: np.ndarray) -> list[np.ndarray]:
-        """Whitened residuals of every factor at states ``x`` (R, N+1, 4), by kind."""
+        """Whitened residuals of every factor at states ``x`` (R, N+1, 4), by kind. The
+        hinge factors' Jacobians are left out: the cost of every trial step needs only
+        their errors."""
         p = self.planning
         positions = x[:, 1:, :2]
         first, second = np.triu_indices(len(x), 1)
-        obstacle, _ = obstacle_errors(
-            positions.reshape(-1, 2), problem.field, p.obstacle_influence_m
+        obstacle = _hinge(problem.field.value(positions.reshape(-1, 2)), p.obstacle_influence_m)
+        _, gaps_m = _robot_offsets(
+            positions[first].reshape(-1, 2), positions[second].reshape(-1, 2)
         )
-        robot, _ = robot_errors(
-            positions[first].reshape(-1, 2),
-            positions[second].reshape(-1, 2),
-            p.robot_influence_m,
-        )
+        return [
+            *self._linear_residuals(problem, x),
+            obstacle / self.params.obstacle_sigma,
+            _hinge(gaps_m, p.robot_influence_m) / self.params.robot_sigma,
+        ]
+
+    def _linear_residuals(self, problem: FgpProblem, x: np.ndarray) -> list[np.ndarray]:
+        """Whitened residuals of the start, dynamics and goal factors at states ``x``."""
         goal = np.concatenate([problem.goals_xy_m, np.zeros_like(problem.goals_xy_m)], axis=1)
         return [
             (x[:, 0] - problem.starts) / self._start_sigma,
             (x[:, 1:] - x[:, :-1] @ self._transition.T) / self._dynamics_sigma,
             (x[:, -1] - goal) / self._goal_sigma,
-            obstacle / self.params.obstacle_sigma,
-            robot / self.params.robot_sigma,
         ]
 
     def cost(self, problem: FgpProblem, x: np.ndarray) -> float:
@@ -256,7 +268,7 @@ class FactorGraphPlanner:
         """
         p = self.planning
         count, n = len(x), self.steps
-        start_e, dynamics_e, goal_e, _, _ = self.residuals(problem, x)
+        start_e, dynamics_e, goal_e = self._linear_residuals(problem, x)
         graph = gtsam.GaussianFactorGraph()
         unit1, unit4 = self._unit[1], self._unit[4]
         for r in range(count):
