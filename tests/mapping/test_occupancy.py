@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from acslam.config import MappingConfig
-from acslam.grid import GridSpec
+from acslam.grid import GridSpec, bresenham
 from acslam.mapping.occupancy import (
     FIXED_POINT_SCALE,
+    HIT_DEPTH_CELLS,
     LogOddsGrid,
     TeamMap,
     _add_to_grids,
@@ -60,6 +61,33 @@ def test_single_beam_updates_bresenham_cells_with_analytic_values() -> None:
     assert got[(5, 2)] == pytest.approx(-0.4, abs=QUANTUM)
     assert got[(5, 7)] == pytest.approx(-0.39, abs=QUANTUM)
     assert got[(5, 12)] == pytest.approx(0.8075, abs=QUANTUM)
+
+
+def test_a_scans_cells_are_its_beams_lines_each_once_in_grid_order() -> None:
+    """With a kernel of the endpoint cell alone, a scan changes exactly the cells of its
+    beams' Bresenham lines (``grid.bresenham``) that lie in the grid, listed once each
+    and in increasing order, also where beams leave the grid."""
+    grid = LogOddsGrid(
+        GridSpec(0.0, 0.0, 0.1, 80, 60), MappingConfig(resolution_m=0.1, hit_radius_m=0.05)
+    )
+    rng = np.random.default_rng(0)
+    angles = np.linspace(-math.pi, math.pi, 90, endpoint=False)
+    ranges = rng.uniform(0.2, 3.0, len(angles))
+    pose = np.array([1.05, 4.05, 0.3])  # 1 m from the left edge, 3 m or more from the others
+    flat = grid.scan_update(ranges, angles, pose).flat_indices
+    assert np.all(np.diff(flat) > 0)
+    ((r0, c0),) = grid.spec.world_to_cell(pose[:2])
+    lengths_m = ranges + HIT_DEPTH_CELLS * grid.spec.resolution_m
+    ends_m = pose[:2] + lengths_m[:, None] * np.stack(
+        [np.cos(pose[2] + angles), np.sin(pose[2] + angles)], axis=1
+    )
+    expected = set()
+    for r1, c1 in grid.spec.world_to_cell(ends_m):
+        line = bresenham(int(r0), int(c0), int(r1), int(c1))
+        inside = grid.spec.contains(line)
+        expected |= set((line[inside, 0] * grid.spec.cols + line[inside, 1]).tolist())
+    assert any(c < 0 for _, c in grid.spec.world_to_cell(ends_m))  # some beams leave the grid
+    assert set(flat.tolist()) == expected
 
 
 def test_integrate_then_remove_leaves_an_empty_grid() -> None:

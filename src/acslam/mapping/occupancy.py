@@ -60,7 +60,8 @@ def _logit(probability: float) -> float:
 
 @dataclass(frozen=True)
 class ScanUpdate:
-    """Sparse change one posed scan makes: unique flat cell indices and fixed-point deltas.
+    """Sparse change one posed scan makes: unique flat cell indices, in increasing order
+    (adding them to a grid then reads it front to back), and fixed-point deltas.
 
     Computed once and applied to several grids (global and per-robot), which is why it is
     separate from :meth:`LogOddsGrid.apply`.
@@ -109,12 +110,10 @@ def _scan_update(
     end_c = np.empty(n, np.int64)
     used = np.zeros(n, np.bool_)
     hit = np.zeros(n, np.bool_)
-    max_cells = int(range_max_m / resolution_m) + 3
-    # Cells in first-touch order. Each mark writes its cell at ``listed[count]`` and counts
-    # it only if it is new (branch-free); the one spare slot takes the last such write.
-    listed = np.empty(n * (max_cells + kernel_rows.shape[0]) + 1, np.int64)
-    count = 0
-
+    count = 0  # cells marked
+    # The block every marked cell lies in: the sensor's cell, the beams' ends and the
+    # kernel around them (pass 4 sweeps it row by row).
+    first_row, last_row, first_col, last_col = r0, r0, c0, c0
     # Pass 1: beam endpoints. Endpoint cells are marked first so that no beam of the same
     # scan clears them (a grazing neighbour beam must not erase a hit).
     for b in range(n):
@@ -135,8 +134,9 @@ def _scan_update(
         end_r[b] = int(np.floor((y_m + length * np.sin(a) - origin_y_m) / resolution_m))
         end_c[b] = int(np.floor((x_m + length * np.cos(a) - origin_x_m) / resolution_m))
         r, c = end_r[b], end_c[b]
+        first_row, last_row = min(first_row, r), max(last_row, r)
+        first_col, last_col = min(first_col, c), max(last_col, c)
         if hit[b] and 0 <= r < rows and 0 <= c < cols:
-            listed[count] = r * cols + c
             count += state[r, c] == 0
             state[r, c] |= _HIT_BIT
 
@@ -148,7 +148,6 @@ def _scan_update(
         r, c = r0, c0
         for _ in range(steps):
             if 0 <= r < rows and 0 <= c < cols and (state[r, c] & _HIT_BIT) == 0:
-                listed[count] = r * cols + c
                 count += state[r, c] == 0
                 state[r, c] |= _FREE_BIT
             r, c, err = bresenham_step(r, c, err, drow, dcol, step_r, step_c)
@@ -166,35 +165,39 @@ def _scan_update(
             r = end_r[b] + kernel_rows[k]
             c = end_c[b] + kernel_cols[k]
             if 0 <= r < rows and 0 <= c < cols and kernel_weights[k] > hit_weight[r, c]:
-                listed[count] = r * cols + c
                 count += state[r, c] == 0
                 state[r, c] |= _LISTED_BIT
                 hit_weight[r, c] = kernel_weights[k]
 
     # Pass 4: distance-weighted increments, rounded once to fixed point; scratch reset.
+    # Row by row over the block: the cells come out in grid order, which the grids they
+    # are added to are read in.
+    span = 0
+    for k in range(kernel_rows.shape[0]):
+        span = max(span, abs(kernel_rows[k]), abs(kernel_cols[k]))
     flat_out = np.empty(count, np.int64)
     delta_out = np.empty(count, np.int64)
     m = 0
-    for i in range(count):
-        flat = listed[i]
-        r = flat // cols
-        c = flat - r * cols
-        # sqrt of the squares, not hypot: a third of the scan's time went to hypot's
-        # overflow-safe scaling, needless at map distances.
-        dx_m = origin_x_m + (c + 0.5) * resolution_m - x_m
-        dy_m = origin_y_m + (r + 0.5) * resolution_m - y_m
-        d = math.sqrt(dx_m * dx_m + dy_m * dy_m)
-        falloff = max(0.0, 1.0 - alpha_per_m * d)
-        delta = delta_occ * hit_weight[r, c] * falloff
-        if (state[r, c] & _FREE_BIT) != 0:
-            delta += delta_free * falloff
-        fixed = np.int64(np.floor(delta * FIXED_POINT_SCALE + 0.5))
-        state[r, c] = 0
-        hit_weight[r, c] = 0.0
-        if fixed != 0:
-            flat_out[m] = flat
-            delta_out[m] = fixed
-            m += 1
+    for r in range(max(first_row - span, 0), min(last_row + span + 1, rows)):
+        for c in range(max(first_col - span, 0), min(last_col + span + 1, cols)):
+            if state[r, c] == 0:
+                continue
+            # sqrt of the squares, not hypot: a third of the scan's time went to hypot's
+            # overflow-safe scaling, needless at map distances.
+            dx_m = origin_x_m + (c + 0.5) * resolution_m - x_m
+            dy_m = origin_y_m + (r + 0.5) * resolution_m - y_m
+            d = math.sqrt(dx_m * dx_m + dy_m * dy_m)
+            falloff = max(0.0, 1.0 - alpha_per_m * d)
+            delta = delta_occ * hit_weight[r, c] * falloff
+            if (state[r, c] & _FREE_BIT) != 0:
+                delta += delta_free * falloff
+            fixed = np.int64(np.floor(delta * FIXED_POINT_SCALE + 0.5))
+            state[r, c] = 0
+            hit_weight[r, c] = 0.0
+            if fixed != 0:
+                flat_out[m] = r * cols + c
+                delta_out[m] = fixed
+                m += 1
     return flat_out[:m], delta_out[:m]
 
 
