@@ -132,3 +132,29 @@ def test_updates_near_changes_equal_computing_afresh(seed: int) -> None:
         np.testing.assert_array_equal(costmap.distance_m, expected.distance_m)
         np.testing.assert_array_equal(costmap.cost, expected.cost)
         np.testing.assert_array_equal(costmap.lethal, expected.lethal)
+
+
+def test_values_changing_beside_unchanged_walls_refill_costs_exactly() -> None:
+    """Cells turning known or unknown within a wall's cost radius, no wall moving: the
+    costs follow (unknown cells cost at least ``unknown_cost``), equal to computing
+    afresh to the bit, also after an update that changed nothing."""
+    rng = np.random.default_rng(3)
+    spec = GridSpec(0.0, 0.0, 0.05, 200, 260)
+    values = np.full(spec.shape, -1, dtype=np.int8)
+    values[40:160, 40:220] = 0
+    values[100, 60:200] = 100  # a wall
+    window = Window(0, 0, spec)
+    updater = CostmapUpdater(CONFIG, ROBOT_RADIUS_M, reach_m=1.0)
+    updater.update(values, window)
+    for _ in range(6):
+        r, c = int(rng.integers(85, 110)), int(rng.integers(50, 200))
+        patch = values[r : r + 8, c : c + 30]
+        patch[patch != 100] = rng.choice(np.array([-1, 0], dtype=np.int8), size=patch.shape)[
+            patch != 100
+        ]
+        for _ in range(2):
+            costmap = updater.update(values, window)
+            expected = compute_costmap(values, spec, CONFIG, ROBOT_RADIUS_M, reach_m=1.0)
+            np.testing.assert_array_equal(costmap.cost, expected.cost)
+            np.testing.assert_array_equal(costmap.distance_m, expected.distance_m)
+            np.testing.assert_array_equal(costmap.lethal, expected.lethal)

@@ -29,8 +29,10 @@ from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window
 LETHAL_COST = math.inf
 """Cost of cells the robot's footprint cannot occupy (planners treat them as walls)."""
 
-TILE_CELLS = 32
+TILE_CELLS = 16
 """Side of the tiles :class:`CostmapUpdater` tracks changes in."""
+_UNSET = 127
+"""The value of cells a :class:`CostmapUpdater` window grew by (no OccupancyGrid value)."""
 
 
 @dataclass(frozen=True)
@@ -174,12 +176,59 @@ def compute_costmap(
     values = np.ascontiguousarray(occupancy_values)
     if values.shape != spec.shape:
         raise ValueError(f"occupancy values have shape {values.shape}, grid is {spec.shape}")
-    rule = _CostRule(spec, config, robot_radius_m, reach_m)
+    _, costmap = _costmap_and_squared(
+        values, spec, _CostRule(spec, config, robot_radius_m, reach_m)
+    )
+    return costmap
+
+
+def _costmap_and_squared(
+    values: np.ndarray, spec: GridSpec, rule: _CostRule
+) -> tuple[np.ndarray, Costmap]:
+    """The costmap of C-ordered ``values`` and its squared distances (cells^2)."""
+    squared = squared_distance_cells(values == OCCUPIED)
     cost = np.empty(spec.shape)
     distance_m = np.empty(spec.shape)
     lethal = np.empty(spec.shape, dtype=bool)
-    rule.fill(squared_distance_cells(values == OCCUPIED), values, cost, distance_m, lethal)
-    return Costmap(spec, cost, distance_m, lethal)
+    rule.fill(squared, values, cost, distance_m, lethal)
+    return squared, Costmap(spec, cost, distance_m, lethal)
+
+
+@numba.njit(cache=True, nogil=True)
+def _changed_tiles(
+    values: np.ndarray, old_values: np.ndarray, tile_cells: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which ``tile_cells``-square tiles hold a cell whose value changed, a cell that
+    became or stopped being occupied, and a cell that was :data:`_UNSET`: one pass, no
+    grid-sized masks."""
+    rows, cols = values.shape
+    shape = ((rows + tile_cells - 1) // tile_cells, (cols + tile_cells - 1) // tile_cells)
+    changed = np.zeros(shape, dtype=np.bool_)
+    occupancy_changed = np.zeros(shape, dtype=np.bool_)
+    unset = np.zeros(shape, dtype=np.bool_)
+    for r in range(rows):
+        for c in range(cols):
+            value, old = values[r, c], old_values[r, c]
+            if value != old:
+                tile = (r // tile_cells, c // tile_cells)
+                changed[tile] = True
+                if (value == OCCUPIED) != (old == OCCUPIED):
+                    occupancy_changed[tile] = True
+                if old == _UNSET:
+                    unset[tile] = True
+    return changed, occupancy_changed, unset
+
+
+def _tile_boxes(tiles: np.ndarray, shape: tuple[int, int]) -> list[tuple[int, int, int, int]]:
+    """Cell bounds ``(r0, r1, c0, c1)`` of each connected group of ``tiles`` (diagonals
+    joined), clipped to ``shape``."""
+    labels, count = ndimage.label(tiles, structure=np.ones((3, 3), dtype=bool))
+    boxes = []
+    for box in ndimage.find_objects(labels)[:count]:
+        r0, r1 = box[0].start * TILE_CELLS, min(box[0].stop * TILE_CELLS, shape[0])
+        c0, c1 = box[1].start * TILE_CELLS, min(box[1].stop * TILE_CELLS, shape[1])
+        boxes.append((r0, r1, c0, c1))
+    return boxes
 
 
 def _contains(outer: Window, inner: Window) -> bool:
@@ -195,11 +244,13 @@ def _contains(outer: Window, inner: Window) -> bool:
 class CostmapUpdater:
     """The costmap of a window that grows over a map, recomputed only near what changed.
 
-    A cell's costs depend only on the occupied cells within ``reach_m`` of it (its
-    distance is capped there), so after a change only the cells within reach of a
-    changed cell are recomputed, each from a block reaching ``reach_m`` further. Equal to
-    :func:`compute_costmap` with the same ``reach_m`` to the bit. A window that does not
-    contain the last one is computed afresh.
+    A cell's distance depends only on the occupied cells within ``reach_m`` of it (it is
+    capped there), and its costs on its distance and its own value. So after a change,
+    distances are recomputed only within reach of a cell that became or stopped being
+    occupied (each from a block reaching ``reach_m`` further), and where only a value
+    changed (unknown to free, say) the costs are refilled from the kept squared
+    distances. Equal to :func:`compute_costmap` with the same ``reach_m`` to the bit. A
+    window that does not contain the last one is computed afresh.
     """
 
     def __init__(self, config: CostmapConfig, robot_radius_m: float, reach_m: float) -> None:
@@ -210,6 +261,7 @@ class CostmapUpdater:
         self.reach_m = reach_m
         self._window: Window | None = None
         self._values = np.zeros((0, 0), dtype=np.int8)
+        self._squared_cells = np.zeros((0, 0))
         self._cost = np.zeros((0, 0))
         self._distance_m = np.zeros((0, 0))
         self._lethal = np.zeros((0, 0), dtype=bool)
@@ -220,20 +272,19 @@ class CostmapUpdater:
         if values.shape != window.spec.shape:
             raise ValueError(f"values have shape {values.shape}, window is {window.spec.shape}")
         old = self._window
+        rule = _CostRule(window.spec, self.config, self.robot_radius_m, self.reach_m)
         if old is None or not _contains(window, old):
-            fresh = compute_costmap(
-                values, window.spec, self.config, self.robot_radius_m, self.reach_m
-            )
+            self._squared_cells, fresh = _costmap_and_squared(values, window.spec, rule)
             self._cost, self._distance_m, self._lethal = fresh.cost, fresh.distance_m, fresh.lethal
         else:
             self._grow(window)
-            self._recompute(values, window.spec)
+            self._recompute(values, window.spec, rule)
         self._window, self._values = window, values
         return Costmap(window.spec, self._cost.copy(), self._distance_m.copy(), self._lethal.copy())
 
     def _grow(self, window: Window) -> None:
         """Place the last window's arrays inside the new one; the new cells are unset
-        (their values count as changed)."""
+        (their value is :data:`_UNSET`, so they count as changed)."""
         old = self._window
         assert old is not None
         if old.spec.shape == window.spec.shape:
@@ -241,42 +292,48 @@ class CostmapUpdater:
         r, c = old.row0 - window.row0, old.col0 - window.col0
         rows, cols = old.spec.shape
         inner = (slice(r, r + rows), slice(c, c + cols))
-        grown_values = np.full(window.spec.shape, 127, dtype=np.int8)  # no OccupancyGrid value
+        grown_values = np.full(window.spec.shape, _UNSET, dtype=np.int8)
         grown_values[inner] = self._values
         self._values = grown_values
-        for name in ("_cost", "_distance_m", "_lethal"):
+        for name in ("_squared_cells", "_cost", "_distance_m", "_lethal"):
             array = getattr(self, name)
             grown = np.empty(window.spec.shape, dtype=array.dtype)
             grown[inner] = array
             setattr(self, name, grown)
 
-    def _recompute(self, values: np.ndarray, spec: GridSpec) -> None:
-        rows, cols = spec.shape
-        changed = values != self._values
-        tiles_r, tiles_c = -(-rows // TILE_CELLS), -(-cols // TILE_CELLS)
-        padded = np.zeros((tiles_r * TILE_CELLS, tiles_c * TILE_CELLS), dtype=bool)
-        padded[:rows, :cols] = changed
-        tiles = padded.reshape(tiles_r, TILE_CELLS, tiles_c, TILE_CELLS).any(axis=(1, 3))
-        if not tiles.any():
+    def _recompute(self, values: np.ndarray, spec: GridSpec, rule: _CostRule) -> None:
+        changed, occupancy_changed, unset = _changed_tiles(values, self._values, TILE_CELLS)
+        if not changed.any():
             return
         reach = math.ceil(self.reach_m / spec.resolution_m) + 1
-        # Tiles within reach of a changed tile, diagonals included.
-        square = np.ones((3, 3), dtype=bool)
-        grown = ndimage.binary_dilation(tiles, square, iterations=-(-reach // TILE_CELLS))
-        labels, count = ndimage.label(grown, structure=square)
-        rule = _CostRule(spec, self.config, self.robot_radius_m, self.reach_m)
-        for box in ndimage.find_objects(labels)[:count]:
-            r0, r1 = box[0].start * TILE_CELLS, min(box[0].stop * TILE_CELLS, rows)
-            c0, c1 = box[1].start * TILE_CELLS, min(box[1].stop * TILE_CELLS, cols)
+        # Distances: within reach of an occupancy change (tiles, diagonals included), and
+        # the cells the window grew by.
+        distance_tiles = (
+            ndimage.binary_dilation(
+                occupancy_changed, np.ones((3, 3), dtype=bool), iterations=-(-reach // TILE_CELLS)
+            )
+            | unset
+        )
+        rows, cols = spec.shape
+        for r0, r1, c0, c1 in _tile_boxes(distance_tiles, spec.shape):
             b0, b1 = max(r0 - reach, 0), min(r1 + reach, rows)
             d0, d1 = max(c0 - reach, 0), min(c1 + reach, cols)
-            squared = squared_distance_cells(values[b0:b1, d0:d1] == OCCUPIED)
+            block = squared_distance_cells(values[b0:b1, d0:d1] == OCCUPIED)
+            squared = np.ascontiguousarray(block[r0 - b0 : r1 - b0, c0 - d0 : c1 - d0])
+            self._squared_cells[r0:r1, c0:c1] = squared
+            self._fill(rule, squared, values, (slice(r0, r1), slice(c0, c1)))
+        # Costs alone where only values changed.
+        for r0, r1, c0, c1 in _tile_boxes(changed & ~distance_tiles, spec.shape):
             region = (slice(r0, r1), slice(c0, c1))
-            inner = squared[r0 - b0 : r1 - b0, c0 - d0 : c1 - d0]
-            cost, distance_m = self._cost[region], self._distance_m[region]
-            lethal = self._lethal[region]
-            rule.fill(np.ascontiguousarray(inner), np.ascontiguousarray(values[region]),
-                      cost, distance_m, lethal)  # fmt: skip
+            self._fill(rule, np.ascontiguousarray(self._squared_cells[region]), values, region)
+
+    def _fill(
+        self, rule: _CostRule, squared: np.ndarray, values: np.ndarray, region: tuple[slice, slice]
+    ) -> None:
+        rule.fill(
+            squared, np.ascontiguousarray(values[region]),
+            self._cost[region], self._distance_m[region], self._lethal[region],
+        )  # fmt: skip
 
 
 def known_window(values: np.ndarray, spec: GridSpec, margin_m: float) -> Window:
