@@ -43,6 +43,7 @@ speed and acceleration limits.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -68,6 +69,16 @@ _ABSOLUTE_TOLERANCE = 1e-5
 def _hinge(distance_m: np.ndarray, influence_m: float) -> np.ndarray:
     """Eqs. 4.63 and 4.65: ``1 - d / d_max`` within the influence, 0 beyond."""
     return np.where(distance_m < influence_m, 1.0 - distance_m / influence_m, 0.0)
+
+
+@functools.cache
+def _robot_pairs(count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(first, second)`` of every pair of ``count`` robots, ``first < second``
+    (``np.triu_indices(count, 1)``, which costs more than the residuals it indexes, made
+    once per team size)."""
+    first, second = np.triu_indices(count, 1)
+    first.flags.writeable = second.flags.writeable = False
+    return first, second
 
 
 def _robot_offsets(xy_r_m: np.ndarray, xy_s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -237,7 +248,7 @@ class FactorGraphPlanner:
         their errors."""
         p = self.planning
         positions = x[:, 1:, :2]
-        first, second = np.triu_indices(len(x), 1)
+        first, second = _robot_pairs(len(x))
         obstacle = _hinge(problem.field.value(positions.reshape(-1, 2)), p.obstacle_influence_m)
         _, gaps_m = _robot_offsets(
             positions[first].reshape(-1, 2), positions[second].reshape(-1, 2)
@@ -295,7 +306,7 @@ class FactorGraphPlanner:
             r, i = divmod(int(flat), n)
             b = np.array([-error[flat] / self.params.obstacle_sigma])
             graph.add(gtsam.JacobianFactor(self._key(r, i + 1), jac4[flat], b, unit1))
-        first, second = np.triu_indices(count, 1)
+        first, second = _robot_pairs(count)
         error, jac = robot_errors(
             positions[first].reshape(-1, 2), positions[second].reshape(-1, 2), p.robot_influence_m
         )
