@@ -12,6 +12,7 @@ from acslam.config import LidarConfig, ThesisWorld
 from acslam.geometry import wrap_angle
 from acslam.grid import FREE, OCCUPIED, GridSpec
 from acslam.mapping.correlative import (
+    HeadingTable,
     LikelihoodPyramid,
     SearchWindow,
     angle_step_rad,
@@ -121,6 +122,64 @@ def test_a_window_pinned_on_a_point_holds_that_point_and_equals_the_exhaustive_s
     assert np.all(np.abs(placed_robot - seen) <= 0.25 + spec.resolution_m)
     assert np.linalg.norm(fast.pose[:2] - truth[:2]) <= 2 * spec.resolution_m
     assert abs(wrap_angle(fast.pose[2] - truth[2])) <= 2 * fast.angle_step_rad
+
+
+def _pinned_case(seed: int) -> tuple[np.ndarray, LikelihoodPyramid, SearchWindow]:
+    """Points of a random room seen from a random pose, and a window pinned 0.25 m about
+    where a teammate saw the robot standing."""
+    rng = np.random.default_rng(seed)
+    values, spec = _random_map(rng)
+    pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)
+    occupied = np.argwhere(values == OCCUPIED)
+    picked = spec.cell_to_world(occupied[rng.choice(len(occupied), 150, replace=False)])
+    truth = np.array([*rng.uniform(1.0, 2.0, 2), rng.uniform(-math.pi, math.pi)])
+    c, s = math.cos(truth[2]), math.sin(truth[2])
+    local = (picked - truth[:2]) @ np.array([[c, -s], [s, c]])
+    robot_local = rng.uniform(-1.0, 1.0, 2)
+    seen = truth[:2] + np.array([[c, -s], [s, c]]) @ robot_local + rng.uniform(-0.1, 0.1, 2)
+    return local, pyramid, SearchWindow.pinned(robot_local, seen, 0.25)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_heading_table_answers_a_merges_questions_as_the_exhaustive_search_does(
+    seed: int,
+) -> None:
+    """The best pose, then the best outside zones of 0.5 m (wider than the window) or
+    0.3 rad about each pose found, five times, then the best above a share of the first
+    score: each the exhaustive search's score and pose."""
+    local, pyramid, window = _pinned_case(seed)
+    table = HeadingTable(local, pyramid, window)
+    found: tuple = ()
+    for _ in range(6):
+        kwargs = {"excluded": found, "excluded_radius_m": 0.5, "excluded_angle_rad": 0.3}
+        fast = table.best(**kwargs)
+        slow = exhaustive_match(local, pyramid, window, **kwargs)
+        assert fast is not None and slow is not None
+        assert fast.score == slow.score
+        np.testing.assert_allclose(fast.pose, slow.pose)
+        found = (*found, fast)
+    # Each later answer lies outside the earlier ones' zones, so no better than they.
+    scores = [m.score for m in found]
+    assert scores == sorted(scores, reverse=True) and len(set(scores)) > 1
+    above = table.best(0.99 * scores[0], found[:1], 0.5, 0.3)
+    assert above is None or above.score > 0.99 * scores[0]
+    assert table.best(scores[0]) is None
+
+
+def test_a_zone_narrower_than_the_window_is_searched_by_branch_and_bound() -> None:
+    """A zone of one leaf leaves the rest of the window at its heading: the table alone
+    cannot say what lies there (here the next best pose: the same heading, a cell over),
+    so the answer comes from the full search."""
+    local, pyramid, window = _pinned_case(4)
+    table = HeadingTable(local, pyramid, window)
+    first = table.best()
+    assert first is not None
+    kwargs = {"excluded": (first,), "excluded_radius_m": 0.0, "excluded_angle_rad": 0.0}
+    other, reference = table.best(**kwargs), exhaustive_match(local, pyramid, window, **kwargs)
+    assert other is not None and reference is not None
+    assert reference.pose[2] == pytest.approx(first.pose[2])
+    assert other.score == reference.score
+    np.testing.assert_allclose(other.pose, reference.pose)
 
 
 def test_a_minimum_score_above_the_best_finds_nothing() -> None:

@@ -353,6 +353,41 @@ def _exhaustive(
     return best_s, best_k, best_x, best_y
 
 
+@numba.njit(cache=True, nogil=True)
+def _best_per_angle(
+    field: np.ndarray, pad: int, cells: np.ndarray, columns: int, rows: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per angle k, the best leaf's (score, dx, dy) over every offset: each point adds its
+    block of ``rows x columns`` field cells to the offsets' sums (rows read in a run,
+    where :func:`_score` reads one scattered cell per point and leaf). The sums add the
+    same values in the same order as :func:`_score`, so the scores are its scores."""
+    angles, count = cells.shape[0], cells.shape[1]
+    field_rows, field_cols = field.shape
+    best_s = np.empty(angles)
+    best_x = np.empty(angles, dtype=np.int64)
+    best_y = np.empty(angles, dtype=np.int64)
+    sums = np.empty((rows, columns))
+    for k in range(angles):
+        sums[:] = 0.0
+        for i in range(count):
+            r0 = cells[k, i, 0] + pad
+            c0 = cells[k, i, 1] + pad
+            for dy in range(rows):
+                r = r0 + dy
+                if 0 <= r < field_rows:
+                    for dx in range(columns):
+                        c = c0 + dx
+                        if 0 <= c < field_cols:
+                            sums[dy, dx] += field[r, c]
+        s, x, y = -1.0, -1, -1
+        for dy in range(rows):
+            for dx in range(columns):
+                if sums[dy, dx] > s:
+                    s, x, y = sums[dy, dx], dx, dy
+        best_s[k], best_x[k], best_y[k] = s / count, x, y
+    return best_s, best_x, best_y
+
+
 def _leaf(candidates: _Candidates, pose: np.ndarray, res: float) -> tuple[int, int, int]:
     """The (angle, dx, dy) of the search's grid nearest ``pose``."""
     theta = float(pose[2])
@@ -468,3 +503,67 @@ def _search(
 
 def _match(candidates: _Candidates, k: int, dx: int, dy: int, score: float, res: float) -> Match:
     return Match(_pose(candidates, k, dx, dy, res), float(score), candidates.angle_step_rad, res)
+
+
+class HeadingTable:
+    """Every heading's best pose in a small window, each leaf scored once: the search a
+    sighting pins (:meth:`SearchWindow.pinned`).
+
+    A pinned window is a metre across but turns through every heading, and a merge asks
+    it for the best pose and then, up to ten times, for the best pose away from those
+    found. Where every exclusion zone spans the window in x and y (a merge's zones are
+    1 m or 0.35 rad; the window 1 m), the best pose outside the zones is the best of the
+    headings outside them, so one table of each heading's best answers every question.
+    On an office floor's merge evidence (~750 points within 10 m, 628 headings) the
+    table took 35-50 ms, where each branch and bound took 15-190 ms and a merge's
+    twelve about a second: at 0.1 m cells the pyramid's coarse blocks (1.6 m) bound
+    little. Scores equal :func:`exhaustive_match`'s; a tie goes to the lowest heading,
+    then offset."""
+
+    def __init__(self, points_m: np.ndarray, pyramid: LikelihoodPyramid, window: SearchWindow):
+        self._points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
+        self._pyramid = pyramid
+        self._window = window
+        self._candidates = _candidates(self._points_m, pyramid.spec, window)
+        self._scores, self._dx, self._dy = _best_per_angle(
+            pyramid.levels[0], pyramid.pad, self._candidates.cells, *self._candidates.offsets
+        )
+
+    def best(
+        self,
+        min_score: float = 0.0,
+        excluded: tuple[Match, ...] = (),
+        excluded_radius_m: float = 0.0,
+        excluded_angle_rad: float = 0.0,
+    ) -> Match | None:
+        """What :func:`best_match` returns for these arguments (by branch and bound where
+        a zone leaves part of the window at its headings)."""
+        candidates, res = self._candidates, self._pyramid.spec.resolution_m
+        zones = _zones(candidates, list(excluded), excluded_radius_m, excluded_angle_rad, res)
+        columns, rows = candidates.offsets
+        spans = (
+            (zones[:, 1] - zones[:, 4] <= 0)
+            & (zones[:, 1] + zones[:, 4] >= columns - 1)
+            & (zones[:, 2] - zones[:, 4] <= 0)
+            & (zones[:, 2] + zones[:, 4] >= rows - 1)
+        )
+        if not spans.all():
+            return best_match(
+                self._points_m, self._pyramid, self._window, min_score, excluded,
+                excluded_radius_m, excluded_angle_rad,
+            )  # fmt: skip
+        angles = len(candidates.angles_rad)
+        k = np.arange(angles)
+        allowed = self._scores > min_score
+        for zone in zones:
+            steps = np.abs(k - zone[0])
+            if self._window.half_angle_rad >= math.pi:
+                steps = np.minimum(steps, angles - steps)
+            allowed &= steps > zone[3]
+        if not allowed.any():
+            return None
+        best = int(np.flatnonzero(allowed)[np.argmax(self._scores[allowed])])
+        return _match(
+            candidates, best, int(self._dx[best]), int(self._dy[best]),
+            float(self._scores[best]), res,
+        )  # fmt: skip

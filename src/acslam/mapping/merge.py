@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, replace
+from functools import partial
 
 import numpy as np
 from scipy import ndimage
@@ -36,6 +37,7 @@ from scipy.spatial import cKDTree
 from acslam.geometry import between, transform_points
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, window_around
 from acslam.mapping.correlative import (
+    HeadingTable,
     LikelihoodPyramid,
     Match,
     SearchWindow,
@@ -198,12 +200,16 @@ def find_merge(
     pyramid = LikelihoodPyramid.from_occupancy(values_a, spec_a, params.sigma_m, depth)
     # The best pose that A's free space does not contradict: one that puts B's walls
     # where A saw nothing is passed over for the next best (kept with its count).
+    search = (
+        partial(best_match, points, pyramid, window)
+        if pin is None
+        else HeadingTable(points, pyramid, window).best
+    )
     contradicted: list[tuple[Match, int]] = []
     while True:
-        best = best_match(
-            points, pyramid, window, 0.0, tuple(m for m, _ in contradicted),
-            params.distinct_m, params.distinct_rad,
-        )  # fmt: skip
+        best = search(
+            0.0, tuple(m for m, _ in contradicted), params.distinct_m, params.distinct_rad
+        )
         if best is None:
             crossing = " without crossing A's free space" if contradicted else ""
             return replace(
@@ -251,9 +257,9 @@ def find_merge(
             return _ambiguous(decision, other, best)
     ruled_out: tuple[Match, ...] = (*(m for m, _ in contradicted), best)
     while len(ruled_out) <= params.max_alternatives:
-        other = best_match(
-            points, pyramid, window, params.max_second_ratio * best.score, ruled_out,
-            params.distinct_m, params.distinct_rad,
+        other = search(
+            params.max_second_ratio * best.score, ruled_out, params.distinct_m,
+            params.distinct_rad,
         )  # fmt: skip
         if other is None:
             return replace(decision, pose=refined_pose(points, pyramid, decision))
