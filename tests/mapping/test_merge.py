@@ -16,7 +16,7 @@ from scipy import ndimage
 from acslam.cli import cli
 from acslam.geometry import compose, transform_points, wrap_angle
 from acslam.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from acslam.mapping.merge import MergeParams, Pin, find_merge, merge_maps
+from acslam.mapping.merge import MergeParams, Pin, find_merge, merge_maps, place_grid
 from acslam.worlds.mapio import load_map, save_map
 
 RESOLUTION_M = 0.05
@@ -255,6 +255,39 @@ def test_merging_a_map_with_itself_moved_restores_its_cells(theta: float) -> Non
         assert agree.all()  # a right angle maps cells onto cells
     else:
         assert agree.mean() >= 0.97  # resampled: only cells on edges may flip to occupied
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_grid_placed_in_another_reads_each_target_cell_centre_from_the_cell_under_it(
+    seed: int,
+) -> None:
+    """Brute force per target cell: its centre taken into the grid's frame, the cell
+    under it read (UNKNOWN off the grid). The grid is mostly unknown, as a frame's square
+    grid is, and part of it lies beyond the target."""
+    rng = np.random.default_rng(seed)
+    spec = GridSpec(-4.0, -3.0, 0.1, 70, 90)
+    values = np.full(spec.shape, UNKNOWN, dtype=np.int8)
+    r0, c0 = rng.integers(0, 40, 2)
+    values[r0 : r0 + 25, c0 : c0 + 35] = rng.choice([FREE, OCCUPIED, UNKNOWN], (25, 35))
+    target = GridSpec(-2.0, -1.0, 0.05, 80, 110)
+    pose = np.array([*rng.uniform(-1.0, 1.0, 2), rng.uniform(-math.pi, math.pi)])
+    placed = place_grid(values, spec, pose, target)
+    rows, cols = np.indices(target.shape)
+    centres = target.cell_to_world(np.column_stack([rows.ravel(), cols.ravel()]))
+    in_grid = transform_points(np.array(_inverse(pose)), centres)
+    cells = np.floor((in_grid - [spec.origin_x_m, spec.origin_y_m]) / spec.resolution_m)
+    cells = cells.astype(int)[:, ::-1]
+    inside = spec.contains(cells)
+    expected = np.full(len(centres), UNKNOWN, dtype=np.int8)
+    expected[inside] = values[cells[inside, 0], cells[inside, 1]]
+    assert (expected != UNKNOWN).sum() > 100
+    np.testing.assert_array_equal(placed.ravel(), expected)
+
+
+def _inverse(pose: np.ndarray) -> np.ndarray:
+    """The inverse of a planar pose."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return np.array([-c * pose[0] - s * pose[1], s * pose[0] - c * pose[1], -pose[2]])
 
 
 def _saved(tmp_path: Path, name: str, mapped: tuple[np.ndarray, GridSpec]) -> Path:

@@ -127,7 +127,8 @@ def world_known(
         else:
             continue
         origin = true_starts[view.robot_ids[0]]
-        known |= place_grid(mask.astype(np.int8), view.spec, origin, spec) == 1
+        marked = np.where(mask, np.int8(1), np.int8(UNKNOWN))  # place_grid reads only known cells
+        known |= place_grid(marked, view.spec, origin, spec) == 1
     return known
 
 

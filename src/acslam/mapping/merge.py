@@ -384,19 +384,45 @@ def place_grid(
     values: np.ndarray, spec: GridSpec, pose: np.ndarray, target: GridSpec
 ) -> np.ndarray:
     """A grid whose frame lies at ``pose`` in ``target``'s frame, read at each of
-    ``target``'s cell centres (the nearest cell; UNKNOWN off the grid)."""
+    ``target``'s cell centres (the nearest cell; UNKNOWN off the grid).
+
+    Only the target cells over the grid's known part are read: a frame's grid is a
+    square twice the building's diagonal wide, and reading it at every cell of the world
+    took a third of a second per scored sample of an office floor."""
+    values = np.asarray(values)
+    placed = np.full(target.shape, UNKNOWN, dtype=np.int8)
+    known = values != UNKNOWN
+    known_rows, known_cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if len(known_rows) == 0:
+        return placed
+    row_start, row_stop = int(known_rows[0]), int(known_rows[-1]) + 1
+    col_start, col_stop = int(known_cols[0]), int(known_cols[-1]) + 1
+    # The known part's corners in the target's frame, its box widened by a cell for the
+    # rounding of the cell centres on its edge.
+    res = spec.resolution_m
+    corners = np.array(
+        [[spec.origin_x_m + c * res, spec.origin_y_m + r * res]
+         for r in (row_start, row_stop) for c in (col_start, col_stop)]
+    )  # fmt: skip
+    box = (transform_points(pose, corners) - [target.origin_x_m, target.origin_y_m]) / (
+        target.resolution_m
+    )
+    c0, r0 = np.maximum(np.floor(box.min(axis=0)).astype(int) - 1, 0)
+    c1, r1 = np.minimum(np.ceil(box.max(axis=0)).astype(int) + 1, [target.cols, target.rows])
+    if c0 >= c1 or r0 >= r1:
+        return placed
     x_m, y_m, theta = between(np.asarray(pose, dtype=float), np.zeros(3))
     c, s = math.cos(theta), math.sin(theta)
     # The target's cell centres in the grid's frame, row by column (an affine map).
-    xs = target.origin_x_m + (np.arange(target.cols) + 0.5) * target.resolution_m
-    ys = target.origin_y_m + (np.arange(target.rows) + 0.5) * target.resolution_m
+    xs = target.origin_x_m + (np.arange(c0, c1) + 0.5) * target.resolution_m
+    ys = target.origin_y_m + (np.arange(r0, r1) + 0.5) * target.resolution_m
     frame_x = c * xs[None, :] - s * ys[:, None] + x_m
     frame_y = s * xs[None, :] + c * ys[:, None] + y_m
-    cols = np.floor((frame_x - spec.origin_x_m) / spec.resolution_m).astype(np.int64)
-    rows = np.floor((frame_y - spec.origin_y_m) / spec.resolution_m).astype(np.int64)
-    inside = (rows >= 0) & (rows < spec.rows) & (cols >= 0) & (cols < spec.cols)
-    placed = np.full(target.shape, UNKNOWN, dtype=np.int8)
-    placed[inside] = np.asarray(values)[rows[inside], cols[inside]]
+    cols = np.floor((frame_x - spec.origin_x_m) / res).astype(np.int64)
+    rows = np.floor((frame_y - spec.origin_y_m) / res).astype(np.int64)
+    inside = (rows >= row_start) & (rows < row_stop) & (cols >= col_start) & (cols < col_stop)
+    block = placed[r0:r1, c0:c1]
+    block[inside] = values[rows[inside], cols[inside]]
     return placed
 
 
