@@ -4,6 +4,7 @@ exhaustive search it must equal, and poses recovered from simulated scans."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -92,41 +93,22 @@ def test_branch_and_bound_returns_what_the_exhaustive_search_returns(seed: int, 
     np.testing.assert_allclose(fast_third.pose, slow_third.pose)
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_a_window_pinned_on_a_point_holds_that_point_and_equals_the_exhaustive_search(
-    seed: int,
-) -> None:
-    """A teammate saw the robot at ``seen``: only poses that put the robot's place near it,
-    at every heading, are searched, and branch and bound still returns the exhaustive
-    search's pose, which puts the robot within the window."""
-    rng = np.random.default_rng(seed)
-    values, spec = _random_map(rng)
-    pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)
-    occupied = np.argwhere(values == OCCUPIED)
-    picked = spec.cell_to_world(occupied[rng.choice(len(occupied), 150, replace=False)])
-    truth = np.array([*rng.uniform(1.0, 2.0, 2), rng.uniform(-math.pi, math.pi)])
-    c, s = math.cos(truth[2]), math.sin(truth[2])
-    local = (picked - truth[:2]) @ np.array([[c, -s], [s, c]])
-    robot_local = rng.uniform(-1.0, 1.0, 2)  # the robot's place in the points' frame
-    seen = truth[:2] + np.array([[c, -s], [s, c]]) @ robot_local + rng.uniform(-0.1, 0.1, 2)
-    window = SearchWindow.pinned(robot_local, seen, 0.25)
-    fast = best_match(local, pyramid, window)
-    slow = exhaustive_match(local, pyramid, window)
-    assert fast is not None and slow is not None
-    assert fast.score == slow.score
-    np.testing.assert_allclose(fast.pose, slow.pose)
-    placed_robot = fast.pose[:2] + np.array(
-        [[math.cos(fast.pose[2]), -math.sin(fast.pose[2])],
-         [math.sin(fast.pose[2]), math.cos(fast.pose[2])]]
-    ) @ robot_local  # fmt: skip
-    assert np.all(np.abs(placed_robot - seen) <= 0.25 + spec.resolution_m)
-    assert np.linalg.norm(fast.pose[:2] - truth[:2]) <= 2 * spec.resolution_m
-    assert abs(wrap_angle(fast.pose[2] - truth[2])) <= 2 * fast.angle_step_rad
+@dataclass(frozen=True)
+class _PinnedCase:
+    """Points of a random room seen from ``truth``; the robot stands at ``robot_local``
+    in the points' frame, and a teammate saw it at ``seen`` (0.1 m off): the window
+    pinned 0.25 m about it."""
+
+    local: np.ndarray
+    pyramid: LikelihoodPyramid
+    window: SearchWindow
+    robot_local: np.ndarray
+    seen: np.ndarray
+    truth: np.ndarray
+    resolution_m: float
 
 
-def _pinned_case(seed: int) -> tuple[np.ndarray, LikelihoodPyramid, SearchWindow]:
-    """Points of a random room seen from a random pose, and a window pinned 0.25 m about
-    where a teammate saw the robot standing."""
+def _pinned_case(seed: int) -> _PinnedCase:
     rng = np.random.default_rng(seed)
     values, spec = _random_map(rng)
     pyramid = LikelihoodPyramid.from_occupancy(values, spec, sigma_m=0.08, depth=3)
@@ -137,7 +119,30 @@ def _pinned_case(seed: int) -> tuple[np.ndarray, LikelihoodPyramid, SearchWindow
     local = (picked - truth[:2]) @ np.array([[c, -s], [s, c]])
     robot_local = rng.uniform(-1.0, 1.0, 2)
     seen = truth[:2] + np.array([[c, -s], [s, c]]) @ robot_local + rng.uniform(-0.1, 0.1, 2)
-    return local, pyramid, SearchWindow.pinned(robot_local, seen, 0.25)
+    window = SearchWindow.pinned(robot_local, seen, 0.25)
+    return _PinnedCase(local, pyramid, window, robot_local, seen, truth, spec.resolution_m)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_window_pinned_on_a_point_holds_that_point_and_equals_the_exhaustive_search(
+    seed: int,
+) -> None:
+    """A teammate saw the robot at ``seen``: only poses that put the robot's place near it,
+    at every heading, are searched, and branch and bound still returns the exhaustive
+    search's pose, which puts the robot within the window."""
+    case = _pinned_case(seed)
+    fast = best_match(case.local, case.pyramid, case.window)
+    slow = exhaustive_match(case.local, case.pyramid, case.window)
+    assert fast is not None and slow is not None
+    assert fast.score == slow.score
+    np.testing.assert_allclose(fast.pose, slow.pose)
+    placed_robot = fast.pose[:2] + np.array(
+        [[math.cos(fast.pose[2]), -math.sin(fast.pose[2])],
+         [math.sin(fast.pose[2]), math.cos(fast.pose[2])]]
+    ) @ case.robot_local  # fmt: skip
+    assert np.all(np.abs(placed_robot - case.seen) <= 0.25 + case.resolution_m)
+    assert np.linalg.norm(fast.pose[:2] - case.truth[:2]) <= 2 * case.resolution_m
+    assert abs(wrap_angle(fast.pose[2] - case.truth[2])) <= 2 * fast.angle_step_rad
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -147,7 +152,8 @@ def test_the_heading_table_answers_a_merges_questions_as_the_exhaustive_search_d
     """The best pose, then the best outside zones of 0.5 m (wider than the window) or
     0.3 rad about each pose found, five times, then the best above a share of the first
     score: each the exhaustive search's score and pose."""
-    local, pyramid, window = _pinned_case(seed)
+    case = _pinned_case(seed)
+    local, pyramid, window = case.local, case.pyramid, case.window
     table = HeadingTable(local, pyramid, window)
     found: tuple = ()
     for _ in range(6):
@@ -170,7 +176,8 @@ def test_a_zone_narrower_than_the_window_is_searched_by_branch_and_bound() -> No
     """A zone of one leaf leaves the rest of the window at its heading: the table alone
     cannot say what lies there (here the next best pose: the same heading, a cell over),
     so the answer comes from the full search."""
-    local, pyramid, window = _pinned_case(4)
+    case = _pinned_case(4)
+    local, pyramid, window = case.local, case.pyramid, case.window
     table = HeadingTable(local, pyramid, window)
     first = table.best()
     assert first is not None
