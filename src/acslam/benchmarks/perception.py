@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from functools import partial
 
 import numba
@@ -32,7 +33,9 @@ from acslam.exploration.params import DbscanParams, FactorGraphParams
 from acslam.geometry import compose, transform_points
 from acslam.grid import OCCUPIED, UNKNOWN, GridSpec, Window, bresenham
 from acslam.mapping.correlative import (
+    HeadingTable,
     LikelihoodPyramid,
+    Match,
     SearchWindow,
     best_match,
     exhaustive_match,
@@ -274,7 +277,8 @@ def bench_scan_matching(quick: bool) -> list[Figure]:
 
 def _global_matching_figures(quick: bool, tree_ms: float) -> list[Figure]:
     """Branch and bound against the exhaustive search of the same poses (a window 1 m and
-    0.5 rad around the truth), and over the whole thesis labyrinth at every heading."""
+    0.5 rad around the truth), over the whole thesis labyrinth at every heading, and a
+    merge's questions in a pinned window: by a heading table against branch and bound."""
     world = build_world(ThesisWorld(generator="thesis", experiment=4), 0)
     pyramid = LikelihoodPyramid.from_occupancy(world_cells(world), world.spec, 0.1, 7)
     sensor = LidarSensor(LidarConfig(), world, np.random.default_rng(0))
@@ -295,6 +299,28 @@ def _global_matching_figures(quick: bool, tree_ms: float) -> list[Figure]:
     same = fast is not None and slow is not None and np.array_equal(fast.pose, slow.pose)
     everywhere = SearchWindow.covering(world.spec, points)
     global_ms = median_ms(lambda: best_match(points, pyramid, everywhere), repeats)
+    # A merge's questions in a pinned window (the seen robot within 0.5 m, every heading):
+    # the best pose, then five times the best 1 m or 0.35 rad away from those found.
+    pinned = SearchWindow.pinned(np.zeros(2), pose[:2], 0.5)
+
+    def questions(best: Callable[..., Match | None]) -> list[Match | None]:
+        found: list[Match | None] = []
+        for _ in range(6):
+            found.append(best(0.0, tuple(m for m in found if m is not None), 1.0, 0.35))
+        return found
+
+    def by_table() -> list[Match | None]:
+        return questions(HeadingTable(points, pyramid, pinned).best)
+
+    def by_branch_and_bound() -> list[Match | None]:
+        return questions(partial(best_match, points, pyramid, pinned))
+
+    table_ms = median_ms(by_table, repeats)
+    bnb_questions_ms = median_ms(by_branch_and_bound, repeats)
+    same_answers = all(
+        a is not None and b is not None and np.array_equal(a.pose, b.pose)
+        for a, b in zip(by_table(), by_branch_and_bound(), strict=True)
+    )
     return [
         Figure(
             "scan matching",
@@ -313,6 +339,16 @@ def _global_matching_figures(quick: bool, tree_ms: float) -> list[Figure]:
             "cKDTree build of one scan",
             tree_ms,
             "no pose guess",
+        ),
+        Figure(
+            "scan matching",
+            "a merge's six questions in a pinned window, heading table",
+            table_ms,
+            "ms",
+            "branch and bound per question",
+            bnb_questions_ms,
+            f"{len(points)} points, 1 m window, every heading; "
+            + ("the same poses" if same_answers else "POSES DIFFER"),
         ),
     ]
 
