@@ -372,6 +372,11 @@ def _best_per_angle(
         for i in range(count):
             r0 = cells[k, i, 0] + pad
             c0 = cells[k, i, 1] + pad
+            if r0 >= 0 and c0 >= 0 and r0 + rows <= field_rows and c0 + columns <= field_cols:
+                for dy in range(rows):  # the whole block inside: no test per cell
+                    for dx in range(columns):
+                        sums[dy, dx] += field[r0 + dy, c0 + dx]
+                continue
             for dy in range(rows):
                 r = r0 + dy
                 if 0 <= r < field_rows:
