@@ -114,10 +114,25 @@ def test_each_merge_has_its_figure_and_the_frames_are_placed_for_scoring(
     assert robots["robot_1"]["merged_s"] == metrics["unknown_starts"]["merges"][0]["time_s"]
 
 
-def test_a_merged_frame_is_what_known_starts_would_have_made(tiny_scenario: Path) -> None:
+@pytest.mark.parametrize(("mapper", "parts"), [("log-odds", 1), ("log-odds", 2), ("submaps", 1)])
+def test_a_merged_frame_is_what_known_starts_would_have_made(
+    tiny_scenario: Path, mapper: str, parts: int
+) -> None:
     """A server built late and caught up on every message its robots sent localizes and
-    maps exactly as one that stepped through them from the start."""
-    scenario = load_scenario(_two_rooms(tiny_scenario, "known"))
+    maps exactly as one that stepped through them from the start: also when the catch-up
+    comes in two parts (a served merge's, see below; here the second from two thirds on,
+    where corrections re-place scans the first part mapped), the log-odds mapper having
+    mapped each scan once per part at its last re-placed pose, and with submaps, which
+    follow every correction."""
+    path = _two_rooms(tiny_scenario, "known")
+    data = yaml.safe_load(path.read_text())
+    # Keyframes reported moved at 2 mm: the replay's corrections re-place scans.
+    data["algorithms"] = {
+        "mapper": {"name": mapper},
+        "localizer": {"name": "isam2", "correction_threshold_m": 0.002},
+    }
+    path.write_text(yaml.safe_dump(data))
+    scenario = load_scenario(path)
     config = scenario.config
     sim = scenario.simulator()
     stepped = Server(config, scenario.starts, scenario.world.spec)
@@ -130,8 +145,10 @@ def test_a_merged_frame_is_what_known_starts_would_have_made(tiny_scenario: Path
         history.append((source.time_s, messages))
         source.advance()
     caught_up = Server(config, scenario.starts, scenario.world.spec)
-    for time_s, messages in history:
-        caught_up.catch_up(messages, time_s)
+    for part in np.split(np.arange(len(history)), [2 * len(history) // 3] if parts == 2 else []):
+        for k in part:
+            caught_up.catch_up(history[k][1], history[k][0])
+        caught_up.caught_up()
     for robot in range(2):
         stamps, poses = stepped.snapshot(0.0).localization.trajectory(robot)
         again_stamps, again_poses = caught_up.snapshot(0.0).localization.trajectory(robot)
@@ -289,6 +306,7 @@ def test_a_merge_found_beside_the_control_loop_is_taken_in_caught_up_exactly() -
     )  # fmt: skip
     for time_s, messages in history:
         reference.catch_up(sorted(messages, key=lambda m: m.robot_id), time_s)
+    reference.caught_up()
     for robot in range(2):
         stamps, poses = frame.snapshot.localization.trajectory(robot)
         again_stamps, again_poses = reference.snapshot(0.0).localization.trajectory(robot)

@@ -620,6 +620,8 @@ class TeamMap(FusedGrids):
     :meth:`move_scan` removes it at the old pose and re-adds it at the new one. A
     correction costs a ray cast per beam of every scan that moved."""
 
+    history_free = True  # exact integer sums: any order of adds and moves, the same grid
+
     def __init__(self, config: MappingConfig, *, spec: GridSpec) -> None:
         super().__init__(config, spec=spec)
         self._scans: dict[Hashable, _PosedScan] = {}

@@ -62,6 +62,8 @@ def rigid_transform(
 class SubmapTeamMap(FusedGrids):
     """Team map composed of rigid per-robot submaps (see the module docstring)."""
 
+    history_free = False  # a submap keeps its scans where they were when it was built
+
     def __init__(self, config: SubmapMappingConfig, *, spec: GridSpec) -> None:
         super().__init__(config, spec=spec)
         self.submap_config = config

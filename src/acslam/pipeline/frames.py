@@ -495,6 +495,7 @@ def _catch_up(
         received = sent_a + sent_b
         merged.history.append((time_s, received))
         merged.server.catch_up([merged.to_local(m) for m in received], time_s)
+    merged.server.caught_up()
 
 
 def _caught_up(

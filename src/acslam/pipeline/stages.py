@@ -119,6 +119,11 @@ class Localizer(Protocol):
 class Mapper(Protocol):
     """The team's occupancy map. Context: ``spec`` (GridSpec of the map)."""
 
+    history_free: bool
+    """The map depends only on each scan's latest pose, not on the adds and moves that
+    led there: a server catching up on old messages may then add each scan once, at the
+    end (:meth:`~acslam.pipeline.server.Server.catch_up`)."""
+
     @property
     def version(self) -> int:
         """Counts changes: equal versions mean an equal map."""
