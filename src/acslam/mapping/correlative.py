@@ -525,7 +525,9 @@ class HeadingTable:
     little. Scores equal :func:`exhaustive_match`'s; a tie goes to the lowest heading,
     then offset."""
 
-    def __init__(self, points_m: np.ndarray, pyramid: LikelihoodPyramid, window: SearchWindow):
+    def __init__(
+        self, points_m: np.ndarray, pyramid: LikelihoodPyramid, window: SearchWindow
+    ) -> None:
         self._points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
         self._pyramid = pyramid
         self._window = window

@@ -388,7 +388,8 @@ def place_grid(
 
     Only the target cells over the grid's known part are read: a frame's grid is a
     square twice the building's diagonal wide, and reading it at every cell of the world
-    took a third of a second per scored sample of an office floor."""
+    took 33 ms per frame and explored-area sample of an office floor (39 s of a 601 s
+    run with unknown starts)."""
     values = np.asarray(values)
     placed = np.full(target.shape, UNKNOWN, dtype=np.int8)
     known = values != UNKNOWN
