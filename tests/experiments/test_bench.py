@@ -34,7 +34,7 @@ def test_ratio_is_value_over_reference_and_json_keeps_it(tmp_path: Path) -> None
 
 
 def test_scan_matching_figure_is_measured_against_its_reference() -> None:
-    figure, nearest, window, everywhere = bench_scan_matching(quick=True)
+    figure, nearest, window, everywhere, pinned = bench_scan_matching(quick=True)
     assert figure.value > 0 and figure.reference_value > 0
     assert figure.ratio == pytest.approx(figure.value / figure.reference_value)
     # ICP of 360-beam scans costs far more than building one scan's KD-tree.
@@ -47,6 +47,10 @@ def test_scan_matching_figure_is_measured_against_its_reference() -> None:
     assert window.reference == "exhaustive search of the same poses"
     assert window.note.endswith("the same pose found")
     assert everywhere.value > 0 and everywhere.reference_value > 0
+    # A merge's questions: the heading table against branch and bound, the same poses.
+    assert pinned.reference == "branch and bound per question"
+    assert pinned.note.endswith("the same poses")
+    assert pinned.value > 0 and pinned.reference_value > 0
 
 
 @pytest.mark.slow
